@@ -1,0 +1,443 @@
+"""The common particle-frame format (``frames.h5``) shared by simulations and CT scans.
+
+Layout (after H5MD's ideas; readable with plain h5py, see docs/frames.md):
+
+``/particles/id`` (N,) int64, ``/particles/radius`` (N,) float64 [m], optional ``mass`` (N,) [kg],
+``shape`` (N, K) (e.g. spherical-harmonic invariants ‖R_n‖ [m]).
+
+``/frames/time`` (T,) [s], ``/frames/step`` (T,) int64, and per-scene control values
+``/frames/<name>`` (T,) such as ``angle`` [rad] or ``axial_strain`` [-].
+
+``/frames/position`` (T, N, 3) [m]; optional ``velocity`` [m/s], ``angular_velocity`` [rad/s],
+``orientation`` (T, N, 4) unit quaternion (w, x, y, z), ``force`` [N], ``torque`` [N m],
+``stress`` (T, N, 3, 3) [Pa]. A particle absent from a frame is a NaN row; row k always means
+particle ``id[k]``.
+
+``/contacts/<frame index>/``: ``i``, ``j`` (ids), ``point`` (M, 3) [m], ``normal`` (M, 3) unit
+vector from i to j, ``fn`` (M, 3) normal force on i [N], ``ft`` (M, 3) tangential force on i [N].
+
+``/walls/<name>/``: ``time`` (S,) [s] and any of ``position`` (S, 3) [m], ``angle`` (S,) [rad],
+``force`` (S, 3) [N], ``torque`` (S, 3) [N m].
+
+``/meta``: attributes ``engine``, ``engine_version``, ``case`` (resolved case as JSON),
+``deck_hash``, ``template_hash``, ``units`` (JSON), ``created``, ``software_version``,
+``source`` ("simulation" or "ct").
+
+Writers write to ``<name>.partial`` and rename on :meth:`FrameWriter.close`, so a file named
+``frames.h5`` is always complete.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import h5py
+import numpy as np
+
+__all__ = [
+    "FrameWriter", "write_frames", "Frames", "Frame", "load", "UNITS", "PER_PARTICLE_FIELDS",
+    "CONTACT_FIELDS",
+]
+
+#: SI unit of every dataset, stored in ``/meta`` as JSON.
+UNITS = {
+    "time": "s", "position": "m", "velocity": "m/s", "angular_velocity": "rad/s",
+    "orientation": "1", "force": "N", "torque": "N m", "stress": "Pa", "radius": "m",
+    "mass": "kg", "angle": "rad", "axial_strain": "1", "point": "m", "fn": "N", "ft": "N",
+}
+
+#: Per-particle datasets under ``/frames`` and the trailing shape of one particle's row.
+PER_PARTICLE_FIELDS = {
+    "position": (3,), "velocity": (3,), "angular_velocity": (3,), "orientation": (4,),
+    "force": (3,), "torque": (3,), "stress": (3, 3),
+}
+CONTACT_FIELDS = ("i", "j", "point", "normal", "fn", "ft")
+
+
+def _software_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("orchestrator")
+    except Exception:  # pragma: no cover - running from a source tree
+        return "0+unknown"
+
+
+class FrameWriter:
+    """Write frames one at a time into ``frames.h5`` (atomic: ``.partial`` then rename).
+
+    Parameters
+    ----------
+    path : path of the final file.
+    ids : (N,) particle ids; row k of every per-particle array belongs to ``ids[k]``.
+    radius : (N,) radii [m].
+    fields : per-particle fields that frames will carry (keys of :data:`PER_PARTICLE_FIELDS`).
+    controls : names of per-frame scalar control values (e.g. ``("angle",)``).
+    mass, shape : optional per-particle mass [kg] and shape descriptors (N, K).
+    meta : attributes for ``/meta`` (dicts are stored as JSON).
+    """
+
+    def __init__(self, path, ids, radius, fields: Iterable[str] = ("position",),
+                 controls: Iterable[str] = (), mass=None, shape=None, meta: Mapping | None = None):
+        self.path = Path(path)
+        self.partial = self.path.with_name(self.path.name + ".partial")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        ids = np.asarray(ids, dtype=np.int64)
+        radius = np.asarray(radius, dtype=np.float64)
+        if ids.ndim != 1 or radius.shape != ids.shape:
+            raise ValueError(f"ids and radius must be 1-D of equal length, got {ids.shape} and {radius.shape}")
+        if len(np.unique(ids)) != len(ids):
+            raise ValueError("particle ids must be unique")
+        self.n = len(ids)
+        self.fields = tuple(fields)
+        for f in self.fields:
+            if f not in PER_PARTICLE_FIELDS:
+                raise ValueError(f"unknown per-particle field {f!r}; known: {sorted(PER_PARTICLE_FIELDS)}")
+        if "position" not in self.fields:
+            self.fields = ("position",) + self.fields
+        self.controls = tuple(controls)
+        self.h5 = h5py.File(self.partial, "w")
+        p = self.h5.create_group("particles")
+        p["id"] = ids
+        p["radius"] = radius
+        if mass is not None:
+            p["mass"] = np.asarray(mass, dtype=np.float64)
+        if shape is not None:
+            p["shape"] = np.asarray(shape, dtype=np.float64)
+        fr = self.h5.create_group("frames")
+        fr.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+        fr.create_dataset("step", shape=(0,), maxshape=(None,), dtype="i8", chunks=(1024,))
+        for c in self.controls:
+            fr.create_dataset(c, shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+        for f in self.fields:
+            tail = PER_PARTICLE_FIELDS[f]
+            fr.create_dataset(f, shape=(0, self.n) + tail, maxshape=(None, self.n) + tail,
+                              dtype="f8", chunks=(1, max(self.n, 1)) + tail, fillvalue=np.nan)
+        self.h5.create_group("contacts")
+        self.h5.create_group("walls")
+        m = self.h5.create_group("meta")
+        base = {"units": UNITS, "created": _dt.datetime.now(_dt.timezone.utc).isoformat(),
+                "software_version": _software_version(), "source": "simulation"}
+        base.update(meta or {})
+        for k, v in base.items():
+            m.attrs[k] = v if isinstance(v, (str, int, float, np.number)) else json.dumps(v, default=str)
+        self.t = 0
+
+    def append(self, time: float, step: int = 0, controls: Mapping[str, float] | None = None,
+               contacts: Mapping[str, np.ndarray] | None = None, **per_particle) -> int:
+        """Append one frame and return its index. ``per_particle`` arrays are (N, ...) in id order."""
+        fr = self.h5["frames"]
+        k = self.t
+        fr["time"].resize((k + 1,))
+        fr["time"][k] = time
+        fr["step"].resize((k + 1,))
+        fr["step"][k] = step
+        controls = dict(controls or {})
+        for c in self.controls:
+            fr[c].resize((k + 1,))
+            fr[c][k] = controls.pop(c, np.nan)
+        if controls:
+            raise ValueError(f"controls {sorted(controls)} were not declared in FrameWriter(controls=...)")
+        if "position" not in per_particle:
+            raise ValueError("every frame needs a position array")
+        for f in self.fields:
+            ds = fr[f]
+            ds.resize((k + 1,) + ds.shape[1:])
+            if f in per_particle and per_particle[f] is not None:
+                a = np.asarray(per_particle.pop(f), dtype=np.float64)
+                if a.shape != ds.shape[1:]:
+                    raise ValueError(f"{f}: expected shape {ds.shape[1:]}, got {a.shape}")
+                ds[k] = a
+            else:
+                per_particle.pop(f, None)
+        extra = {k2 for k2, v in per_particle.items() if v is not None}
+        if extra:
+            raise ValueError(f"fields {sorted(extra)} were not declared in FrameWriter(fields=...)")
+        if contacts is not None:
+            self.write_contacts(k, contacts)
+        self.t += 1
+        return k
+
+    def write_contacts(self, frame_index: int, contacts: Mapping[str, np.ndarray]):
+        """Store the contact list of one frame under ``/contacts/<frame_index>``."""
+        g = self.h5["contacts"].require_group(str(frame_index))
+        for key in CONTACT_FIELDS:
+            if key in contacts and contacts[key] is not None:
+                dtype = "i8" if key in ("i", "j") else "f8"
+                g.create_dataset(key, data=np.asarray(contacts[key], dtype=dtype))
+
+    def write_wall(self, name: str, time, **series):
+        """Store a wall's time series (``position``, ``angle``, ``force``, ``torque`` …)."""
+        g = self.h5["walls"].require_group(name)
+        g.create_dataset("time", data=np.asarray(time, dtype="f8"))
+        for k, v in series.items():
+            g.create_dataset(k, data=np.asarray(v, dtype="f8"))
+
+    def set_meta(self, **attrs):
+        for k, v in attrs.items():
+            self.h5["meta"].attrs[k] = v if isinstance(v, (str, int, float, np.number)) else json.dumps(v, default=str)
+
+    def close(self):
+        """Flush and atomically rename ``<path>.partial`` to ``<path>``."""
+        if self.h5 is None:
+            return
+        self.h5.flush()
+        self.h5.close()
+        self.h5 = None
+        os.replace(self.partial, self.path)
+
+    def abort(self):
+        if self.h5 is not None:
+            self.h5.close()
+            self.h5 = None
+        self.partial.unlink(missing_ok=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def write_frames(path, ids, radius, time, position, step=None, controls: Mapping | None = None,
+                 contacts: Mapping[int, Mapping] | None = None, walls: Mapping[str, Mapping] | None = None,
+                 mass=None, shape=None, meta: Mapping | None = None, **per_particle) -> Path:
+    """Write a whole frame set at once. ``position`` is (T, N, 3); other fields (T, N, ...).
+
+    ``controls`` maps a name to a (T,) array, ``contacts`` a frame index to a contact dict,
+    ``walls`` a wall name to ``{"time": ..., "force": ...}``.
+    """
+    time = np.asarray(time, dtype=float)
+    position = np.asarray(position, dtype=float)
+    T = len(time)
+    step = np.zeros(T, dtype=np.int64) if step is None else np.asarray(step)
+    controls = {k: np.asarray(v, dtype=float) for k, v in (controls or {}).items()}
+    fields = [f for f, v in per_particle.items() if v is not None]
+    with FrameWriter(path, ids, radius, fields=fields, controls=controls.keys(), mass=mass,
+                     shape=shape, meta=meta) as w:
+        for k in range(T):
+            w.append(time[k], int(step[k]), controls={c: v[k] for c, v in controls.items()},
+                     contacts=(contacts or {}).get(k), position=position[k],
+                     **{f: np.asarray(per_particle[f])[k] for f in fields})
+        for name, series in (walls or {}).items():
+            series = dict(series)
+            w.write_wall(name, series.pop("time"), **series)
+    return Path(path)
+
+
+@dataclass
+class Frame:
+    """One frame: a view of :class:`Frames` at index ``index``, with arrays in id order."""
+    index: int
+    time: float
+    step: int
+    ids: np.ndarray
+    radius: np.ndarray
+    data: dict = field(default_factory=dict)
+    controls: dict = field(default_factory=dict)
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.data["position"]
+
+    def __getattr__(self, name):
+        data = self.__dict__.get("data", {})
+        if name in data:
+            return data[name]
+        raise AttributeError(name)
+
+    def present(self) -> np.ndarray:
+        """Boolean mask of particles present in this frame (position not NaN)."""
+        return ~np.isnan(self.position).any(axis=1)
+
+    def to_dataframe(self, dropna: bool = True):
+        """One row per particle: id, radius, x, y, z and any other field flattened (vx, …)."""
+        import pandas as pd
+        cols = {"id": self.ids, "radius": self.radius}
+        names = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
+                 "angular_velocity": ("wx", "wy", "wz"), "force": ("fx", "fy", "fz"),
+                 "torque": ("tx", "ty", "tz"), "orientation": ("qw", "qx", "qy", "qz")}
+        for f, a in self.data.items():
+            if f == "stress":
+                for a_, ax in enumerate("xyz"):
+                    for b_, bx in enumerate("xyz"):
+                        cols[f"s{ax}{bx}"] = a[:, a_, b_]
+            else:
+                for c, col in enumerate(names.get(f, [f"{f}{q}" for q in range(a.shape[1])])):
+                    cols[col] = a[:, c]
+        df = pd.DataFrame(cols)
+        if dropna:
+            df = df[self.present()].reset_index(drop=True)
+        return df
+
+    def to_vtk(self, path):
+        """Write this frame as VTK point data (spheres as points with a ``radius`` array)."""
+        return _frame_to_vtk(self, path)
+
+
+class Frames:
+    """Read a ``frames.h5`` file (or a run directory holding one); arrays are NumPy, in SI.
+
+    >>> fr = Frames("runs/x/liggghts-abc/frames.h5")   # doctest: +SKIP
+    >>> fr.position.shape                                # (T, N, 3)
+    >>> fr[-1].to_dataframe()                            # last frame as a table
+    """
+
+    def __init__(self, path):
+        path = Path(path)
+        if path.is_dir():
+            path = path / "frames.h5"
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no frames.h5 here (is the run complete?)")
+        self.path = path
+        with h5py.File(path, "r") as h:
+            self.ids = h["particles/id"][()]
+            self.radius = h["particles/radius"][()]
+            self.mass = h["particles/mass"][()] if "mass" in h["particles"] else None
+            self.shape = h["particles/shape"][()] if "shape" in h["particles"] else None
+            self.time = h["frames/time"][()]
+            self.step = h["frames/step"][()]
+            self.fields = tuple(f for f in PER_PARTICLE_FIELDS if f in h["frames"])
+            self.controls = {k: h["frames"][k][()] for k in h["frames"]
+                             if k not in PER_PARTICLE_FIELDS and k not in ("time", "step")}
+            self.meta = {k: _maybe_json(v) for k, v in h["meta"].attrs.items()}
+            self.contact_frames = sorted(int(k) for k in h["contacts"])
+            self.wall_names = sorted(h["walls"])
+        self._cache: dict = {}
+        self._index = {int(i): k for k, i in enumerate(self.ids)}
+
+    def __repr__(self):
+        return (f"Frames({str(self.path)!r}: {self.n_frames} frames x {self.n_particles} particles, "
+                f"fields={list(self.fields)}, controls={list(self.controls)}, walls={self.wall_names})")
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.time)
+
+    def __len__(self):
+        return self.n_frames
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.ids)
+
+    def field(self, name: str) -> np.ndarray:
+        """A per-particle field for all frames, (T, N, ...) [SI]."""
+        if name not in self.fields:
+            raise KeyError(f"{self.path}: no field {name!r}; this file has {list(self.fields)}")
+        if name not in self._cache:
+            with h5py.File(self.path, "r") as h:
+                self._cache[name] = h["frames"][name][()]
+        return self._cache[name]
+
+    def __getattr__(self, name):
+        if name in PER_PARTICLE_FIELDS:
+            return self.field(name)
+        controls = self.__dict__.get("controls", {})
+        if name in controls:
+            return controls[name]
+        raise AttributeError(name)
+
+    def row(self, particle_id: int) -> int:
+        """Row index of a particle id."""
+        return self._index[int(particle_id)]
+
+    def __getitem__(self, k: int) -> Frame:
+        k = range(self.n_frames)[k]
+        with h5py.File(self.path, "r") as h:
+            data = {f: h["frames"][f][k] for f in self.fields}
+        return Frame(k, float(self.time[k]), int(self.step[k]), self.ids, self.radius, data,
+                     {c: float(v[k]) for c, v in self.controls.items()})
+
+    def __iter__(self):
+        for k in range(self.n_frames):
+            yield self[k]
+
+    def contacts(self, k: int):
+        """Contacts of frame k as a DataFrame (i, j, point, normal, fn, ft split into x/y/z)."""
+        import pandas as pd
+        k = range(self.n_frames)[k]
+        with h5py.File(self.path, "r") as h:
+            if str(k) not in h["contacts"]:
+                raise KeyError(f"{self.path}: frame {k} has no contacts; frames with contacts: {self.contact_frames}")
+            g = h["contacts"][str(k)]
+            cols = {}
+            for key in CONTACT_FIELDS:
+                if key in g:
+                    a = g[key][()]
+                    if a.ndim == 1:
+                        cols[key] = a
+                    else:
+                        for c, ax in enumerate("xyz"):
+                            cols[f"{key}_{ax}"] = a[:, c]
+        return pd.DataFrame(cols)
+
+    def contact_arrays(self, k: int) -> dict:
+        """Contacts of frame k as a dict of arrays (``i``, ``j``, ``point``, ``normal``, ``fn``, ``ft``)."""
+        k = range(self.n_frames)[k]
+        with h5py.File(self.path, "r") as h:
+            g = h["contacts"][str(k)]
+            return {key: g[key][()] for key in g}
+
+    def wall(self, name: str):
+        """Time series of one wall as a DataFrame (time, position_x, …, force_z, torque_z …)."""
+        import pandas as pd
+        with h5py.File(self.path, "r") as h:
+            g = h["walls"][name]
+            cols = {}
+            for key in g:
+                a = g[key][()]
+                if a.ndim == 1:
+                    cols[key] = a
+                else:
+                    for c, ax in enumerate("xyz"):
+                        cols[f"{key}_{ax}"] = a[:, c]
+        return pd.DataFrame(cols)
+
+    @property
+    def walls(self) -> dict:
+        return {n: self.wall(n) for n in self.wall_names}
+
+    def to_vtk(self, k: int, path):
+        """Write frame k as a VTK file for ParaView."""
+        return self[k].to_vtk(path)
+
+
+def load(path) -> Frames:
+    """Open the frames of a run directory, a ``frames.h5`` file, or a CT frame set."""
+    return Frames(path)
+
+
+def _maybe_json(v):
+    if isinstance(v, bytes):
+        v = v.decode()
+    if isinstance(v, str) and v[:1] in "{[":
+        try:
+            return json.loads(v)
+        except ValueError:
+            return v
+    return v
+
+
+def _frame_to_vtk(frame: Frame, path):
+    import meshio
+    mask = frame.present()
+    pts = frame.position[mask]
+    point_data = {"id": frame.ids[mask].astype(np.int64), "radius": frame.radius[mask]}
+    for f, a in frame.data.items():
+        if f == "position":
+            continue
+        a = a[mask]
+        point_data[f] = a.reshape(len(a), -1) if f == "stress" else a
+    cells = [("vertex", np.arange(len(pts)).reshape(-1, 1))]
+    path = Path(path)
+    tmp = path.with_name(path.stem + ".partial" + path.suffix)
+    meshio.write(tmp, meshio.Mesh(pts, cells, point_data=point_data))
+    os.replace(tmp, path)
+    return path
