@@ -140,7 +140,7 @@ class EngineOptions(Strict):
     """How to launch the engines: MPI ranks for LIGGGHTS, threads for YADE, a wall-clock limit."""
     mpi_ranks: int = Field(1, ge=1)
     threads: int = Field(1, ge=1)
-    timeout: Time = 3600.0
+    timeout: Time = "3600 s"
     progress: bool = True
 
 

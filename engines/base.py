@@ -1,0 +1,254 @@
+"""One small interface for every DEM engine: capabilities, render, run, parse.
+
+An adapter knows how to turn derived parameters into its engine's input, launch the engine and
+read its dumps into frames.h5. It knows nothing of analysis.
+
+Physics features (the vocabulary scenes use in ``required_features``):
+
+========================  ===========================================================
+``hertz``                  Hertz normal elasticity
+``restitution_damping``    viscous normal/tangential damping set from e_n (Tsuji form)
+``seed000_damping``        γ_n = √(4/3 E* m*) with force γ_n √ξ ξ̇ (seed 000 eq. 1)
+``sliding_friction``       Coulomb sliding with a tangential spring (history)
+``adhesion``               constant pull-off F_adh · r_eff/⟨r_eff⟩ (seed 000 eq. 1)
+``rolling_friction``       rolling resistance, constant μ_rol
+``rolling_friction_load``  load-dependent μ_rol = √(2 r_eff ξ) (seed 000)
+``torsion_friction``       twisting resistance limited by μ_tor |F_n + F_adh|
+``plane_wall``             analytic plane wall
+``cylinder_wall``          analytic cylinder wall
+``mesh_walls``             triangulated (STL) walls
+``rotating_walls``         walls rotating at a prescribed angular velocity
+``servo_wall``             a wall driven to a target force
+``membrane``               flexible membrane with follow-the-surface pressure
+``clumps``                 rigid clumps of spheres
+``particle_stress``        per-particle stress tensor
+``contact_output``         contact list with forces
+``periodic``               periodic boundaries
+========================  ===========================================================
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+
+FEATURES = (
+    "hertz", "restitution_damping", "seed000_damping", "sliding_friction", "adhesion",
+    "rolling_friction", "rolling_friction_load", "torsion_friction", "plane_wall",
+    "cylinder_wall", "mesh_walls", "rotating_walls", "servo_wall", "membrane", "clumps",
+    "particle_stress", "contact_output", "periodic",
+)
+
+REPO = Path(__file__).resolve().parents[1]
+TEMPLATES = REPO / "templates"
+
+
+class EngineError(RuntimeError):
+    """An engine that failed, with its exit status and the tail of its log."""
+
+
+class UnsupportedFeature(EngineError):
+    """A case asks for physics an engine lacks, and names no accepted substitute."""
+
+
+@dataclass
+class Substitution:
+    """An engine mechanism standing in for a physics term it lacks."""
+    feature: str
+    mechanism: str
+    note: str = ""
+
+    def as_dict(self):
+        return {"feature": self.feature, "mechanism": self.mechanism, "note": self.note}
+
+
+@dataclass
+class RunResult:
+    returncode: int
+    wall_time: float
+    steps: int
+    log: Path
+    timed_out: bool = False
+    extra: dict = field(default_factory=dict)
+
+
+class Engine(ABC):
+    """Base class of the engine adapters."""
+
+    name: str = ""
+    executable: str = ""
+    #: feature -> the engine mechanism that implements it exactly
+    capabilities: dict[str, str] = {}
+    #: feature -> {substitute name: description} the engine can offer instead
+    substitutes: dict[str, dict[str, str]] = {}
+
+    # -- discovery -------------------------------------------------------------------------
+    def available(self) -> bool:
+        return shutil.which(self.executable) is not None
+
+    @abstractmethod
+    def version(self) -> str:
+        """Engine version string (e.g. ``LIGGGHTS-PUBLIC 3.8.0``)."""
+
+    # -- capabilities ----------------------------------------------------------------------
+    def check(self, features: list[str], accepted: dict[str, str]) -> list[Substitution]:
+        """Refuse features the engine lacks unless ``accepted`` names a substitute it offers.
+
+        ``accepted`` maps a feature to a substitute name (the case's ``contact.substitutes``,
+        keys may be prefixed ``<engine>.`` to apply to one engine only)."""
+        subs = []
+        for f in features:
+            if f in self.capabilities:
+                continue
+            offered = self.substitutes.get(f, {})
+            choice = accepted.get(f"{self.name}.{f}", accepted.get(f))
+            if choice is not None and choice in offered:
+                subs.append(Substitution(f, choice, offered[choice]))
+                continue
+            if offered:
+                opts = "; ".join(f"'{k}': {v}" for k, v in offered.items())
+                raise UnsupportedFeature(
+                    f"{self.name} has no exact mechanism for '{f}'. Accept a substitute in the case "
+                    f"with contact.substitutes: {{{f}: NAME}} (or '{self.name}.{f}: NAME'); {self.name} offers {opts}")
+            raise UnsupportedFeature(f"{self.name} cannot simulate '{f}' and offers no substitute; "
+                                     f"run this case on another engine (engines: [...])")
+        return subs
+
+    # -- the three steps -------------------------------------------------------------------
+    @abstractmethod
+    def render(self, case, params: dict, run_dir: Path, resume: dict | None = None) -> Path:
+        """Write the deck (and any input files) into ``run_dir``; return the main deck path."""
+
+    @abstractmethod
+    def command(self, deck: Path, case) -> list[str]:
+        """The command line that runs ``deck``."""
+
+    def progress_step(self, line: str) -> int | None:
+        """Parse the current step from one line of engine output, or None."""
+        return None
+
+    @abstractmethod
+    def parse(self, case, params: dict, run_dir: Path, meta: dict) -> Path:
+        """Read the engine's dumps in ``run_dir`` and write ``run_dir/frames.h5``."""
+
+    def resume_state(self, run_dir: Path) -> dict | None:
+        """What an interrupted run left to resume from (None: start afresh)."""
+        return None
+
+    # -- running ---------------------------------------------------------------------------
+    def run(self, deck: Path, case, total_steps: int, log: Path, timeout: float,
+            progress: bool = True, env: dict | None = None) -> RunResult:
+        """Run the engine on ``deck`` in its directory, streaming output into ``log``, with a
+        progress bar fed by the engine's step counter, a wall-clock ``timeout`` [s] and a kill.
+        Raises :class:`EngineError` with the log's last lines on failure."""
+        cmd = self.command(deck, case)
+        run_dir = deck.parent
+        full_env = dict(os.environ)
+        full_env.update(env or {})
+        full_env.setdefault("OMP_NUM_THREADS", str(case.engine_options.threads))
+        t0 = time.perf_counter()
+        step = 0
+        timed_out = False
+        with open(log, "ab") as logf:
+            proc = subprocess.Popen(cmd, cwd=run_dir, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                    env=full_env, start_new_session=True)
+            bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress)
+            try:
+                import selectors
+                sel = selectors.DefaultSelector()
+                sel.register(proc.stdout, selectors.EVENT_READ)
+                buf = b""
+                while True:
+                    if time.perf_counter() - t0 > timeout:
+                        timed_out = True
+                        _kill(proc)
+                        break
+                    events = sel.select(timeout=0.5)
+                    if not events:
+                        if proc.poll() is not None:
+                            break
+                        continue
+                    chunk = os.read(proc.stdout.fileno(), 65536)
+                    if not chunk:
+                        break
+                    logf.write(chunk)
+                    buf += chunk
+                    *lines, buf = buf.split(b"\n")
+                    for raw in lines:
+                        s = self.progress_step(raw.decode(errors="replace"))
+                        if s is not None:
+                            step = s
+                            bar.update(step)
+                proc.wait(timeout=30)
+            except BaseException:
+                _kill(proc)
+                raise
+            finally:
+                bar.close()
+        wall = time.perf_counter() - t0
+        res = RunResult(proc.returncode if proc.returncode is not None else -9, wall, step, log, timed_out)
+        if timed_out:
+            raise EngineError(f"{self.name} exceeded its wall-clock limit of {timeout:.0f} s and was killed "
+                              f"(engine_options.timeout).\n{tail(log)}")
+        if proc.returncode != 0:
+            raise EngineError(f"{self.name} failed with exit status {proc.returncode} running {deck}.\n"
+                              f"{self.explain_failure(log)}")
+        return res
+
+    def explain_failure(self, log: Path) -> str:
+        return tail(log)
+
+
+def _kill(proc):
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=5)
+    except Exception:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except Exception:
+            pass
+        proc.wait()
+
+
+def tail(path: Path, n: int = 25) -> str:
+    """The last ``n`` lines of a log, indented, for error messages."""
+    try:
+        lines = Path(path).read_text(errors="replace").splitlines()[-n:]
+    except OSError:
+        return f"(no log at {path})"
+    return "last lines of " + str(path) + ":\n" + "\n".join("    " + l for l in lines)
+
+
+class _Progress:
+    """A rich progress bar with ETA, fed with the engine's step counter."""
+
+    def __init__(self, label: str, total: int, enabled: bool = True):
+        self.p = None
+        if not enabled or total <= 0:
+            return
+        try:
+            import sys
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+            if not sys.stderr.isatty():
+                return
+            self.p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                              TimeElapsedColumn(), TimeRemainingColumn(), transient=True)
+            self.p.start()
+            self.task = self.p.add_task(label, total=total)
+        except Exception:
+            self.p = None
+
+    def update(self, step: int):
+        if self.p is not None:
+            self.p.update(self.task, completed=step)
+
+    def close(self):
+        if self.p is not None:
+            self.p.stop()

@@ -1,0 +1,216 @@
+"""LIGGGHTS-PUBLIC 3.8 adapter (Debian ``liggghts``).
+
+Render: ``templates/liggghts/<scene>.in.j2`` with the derived parameters; particles go in through
+``read_data`` from the orchestrator's particle table. Run: ``liggghts -in deck.in`` (under
+``mpirun -np N`` for N > 1 ranks), progress from thermo lines. Parse: ``dump custom`` text files
+(one per output step, ``dump/frame.<step>.txt``) into frames.h5. Resume: ``restart`` files
+``restart/state.<step>.restart`` and ``run N upto``.
+"""
+from __future__ import annotations
+
+import functools
+import re
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from .base import Engine, EngineError, tail
+from .render import render_template
+
+_THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
+
+
+class Liggghts(Engine):
+    name = "liggghts"
+    executable = "liggghts"
+    capabilities = {
+        "hertz": "pair_style gran model hertz",
+        "restitution_damping": "model hertz with coefficientRestitution (Tsuji damping), limitForce on",
+        "sliding_friction": "tangential history (Coulomb limit mu*Fn)",
+        "rolling_friction": "rolling_friction cdt (constant mu_rol, elastic-plastic torque limit)",
+        "plane_wall": "fix wall/gran primitive zplane",
+        "cylinder_wall": "fix wall/gran primitive zcylinder",
+        "mesh_walls": "fix mesh/surface + fix wall/gran mesh",
+        "rotating_walls": "fix move/mesh rotate",
+        "servo_wall": "fix mesh/surface/stress/servo",
+        "clumps": "fix multisphere",
+        "particle_stress": "compute stress/atom",
+        "contact_output": "compute pair/gran/local + dump local",
+        "periodic": "boundary p",
+    }
+    substitutes = {
+        "adhesion": {
+            "edinburgh_per_type_pair": "model edinburgh pullOffForce per type pair; each PSD bin its own "
+                                       "type with F_ij = F_adh r_ij/<r_eff> (exact per bin, binned in r)",
+        },
+        "seed000_damping": {
+            "tsuji_restitution": "Tsuji damping (force ∝ δ^1/4 δ̇) with the restitution that seed 000's "
+                                 "γ_n = sqrt(4/3 E* m*) delivers, instead of force ∝ δ^1/2 δ̇",
+        },
+        "rolling_friction_load": {
+            "epsd2_constant": "rolling_friction epsd2 with a constant μ_rol = √(2 r_eff ξ) at the expected overlap",
+        },
+        "torsion_friction": {
+            "luding_torsion": "rolling_friction luding torsion on (same stiffness and μ as rolling)",
+        },
+        "membrane": {
+            "servo_ring_walls": "a stack of independently servo-controlled cylindrical ring walls",
+        },
+    }
+
+    @functools.lru_cache(maxsize=1)
+    def version(self) -> str:
+        try:
+            out = subprocess.run([self.executable, "-h"], capture_output=True, text=True, timeout=30).stdout
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise EngineError(f"cannot run {self.executable}: {exc}") from None
+        m = re.search(r"Version (LIGGGHTS-PUBLIC [^,]+)", out)
+        return m.group(1) if m else out.splitlines()[0] if out else "unknown"
+
+    # -- render -----------------------------------------------------------------------------
+    def render(self, case, params, run_dir: Path, resume=None) -> Path:
+        run_dir = Path(run_dir)
+        for d in ("dump", "restart"):
+            (run_dir / d).mkdir(exist_ok=True)
+        data = run_dir / "particles.data"
+        if not data.exists():
+            write_data_file(data, run_dir / "particles.txt", params["scene"]["box_lo"], params["scene"]["box_hi"])
+        sc = params["scene"]
+        ctx = {
+            "case": case, "p": params, "resume": resume,
+            "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
+            "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
+            "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
+        }
+        deck = run_dir / ("resume.in" if resume else "deck.in")
+        render_template(f"liggghts/{case.scene.kind}.in.j2", ctx, deck)
+        return deck
+
+    def command(self, deck: Path, case) -> list[str]:
+        # stdbuf: LIGGGHTS' stdout is block-buffered in a pipe and MPI_Abort discards the
+        # buffer, which would swallow the ERROR line that explains a failure
+        cmd = ["stdbuf", "-oL", "-eL", self.executable, "-in", deck.name, "-log", "none", "-echo", "none"]
+        n = case.engine_options.mpi_ranks
+        if n > 1:
+            cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(n)] + cmd
+        return cmd
+
+    def progress_step(self, line: str):
+        m = _THERMO.match(line.encode() if isinstance(line, str) else line)
+        return int(m.group(1)) if m else None
+
+    def explain_failure(self, log: Path) -> str:
+        text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
+        errs = [l for l in text.splitlines() if l.startswith("ERROR")]
+        msg = ""
+        if errs:
+            msg = "LIGGGHTS says: " + errs[-1] + "\n"
+            m = re.search(r"Last command: (.*)", text)
+            if m:
+                msg += f"on deck line: {m.group(1)}\n"
+        return msg + tail(log)
+
+    # -- resume -----------------------------------------------------------------------------
+    def resume_state(self, run_dir: Path):
+        files = sorted((Path(run_dir) / "restart").glob("state.*.restart"),
+                       key=lambda p: int(p.name.split(".")[1]))
+        if not files:
+            return None
+        return {"restart_file": f"restart/{files[-1].name}", "step": int(files[-1].name.split(".")[1]),
+                "candidates": [f"restart/{f.name}" for f in reversed(files)]}
+
+    # -- parse ------------------------------------------------------------------------------
+    def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
+        from orchestrator.frames import FrameWriter
+        from orchestrator.particles_io import read_particle_table
+        run_dir = Path(run_dir)
+        files = sorted((run_dir / "dump").glob("frame.*.txt"), key=lambda p: int(p.name.split(".")[1]))
+        if not files:
+            raise EngineError(f"{run_dir}/dump: LIGGGHTS wrote no frames\n{tail(run_dir / 'engine.log')}")
+        table = read_particle_table(run_dir / "particles.txt")
+        ids = table["id"]
+        mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
+        fields = _fields(case)
+        dt = params["dt"]
+        extras = _scene_hook(case, "liggghts_extras", run_dir, params)
+        controls = extras.get("controls", {})
+        with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
+                         controls=controls.keys(), mass=mass, meta=meta) as w:
+            row = {int(i): k for k, i in enumerate(ids)}
+            for f in files:
+                step, cols, a = read_dump(f)
+                rows = np.array([row[int(i)] for i in a[:, cols.index("id")]], dtype=np.int64)
+                arrays = {}
+                for field, names in _COLUMNS.items():
+                    if field in fields and names[0] in cols:
+                        out = np.full((len(ids), 3), np.nan)
+                        out[rows] = a[:, [cols.index(c) for c in names]]
+                        arrays[field] = out
+                k = w.t
+                w.append(step * dt, step, controls={c: v[k] if k < len(v) else np.nan for c, v in controls.items()},
+                         **arrays)
+            for name, series in extras.get("walls", {}).items():
+                series = dict(series)
+                w.write_wall(name, series.pop("time"), **series)
+        return run_dir / "frames.h5"
+
+
+_COLUMNS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
+            "angular_velocity": ("omegax", "omegay", "omegaz"), "force": ("fx", "fy", "fz"),
+            "torque": ("tqx", "tqy", "tqz")}
+
+
+def _fields(case) -> list[str]:
+    o = case.output
+    return ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
+                                           ("force", o.force), ("torque", o.torque)) if on]
+
+
+def _scene_hook(case, name, *args) -> dict:
+    from orchestrator.scenes import scene_module
+    fn = getattr(scene_module(case.scene.kind), name, None)
+    return fn(*args) if fn else {}
+
+
+def read_dump(path) -> tuple[int, list[str], np.ndarray]:
+    """Read one LAMMPS/LIGGGHTS ``dump custom`` snapshot: (step, column names, (n, k) array)."""
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    header_end = 0
+    lines = raw.split(b"\n", 9)
+    if not lines[0].startswith(b"ITEM: TIMESTEP"):
+        raise EngineError(f"{path}: not a dump custom file")
+    step = int(lines[1])
+    n = int(lines[3])
+    cols = lines[8].decode().split()[2:]
+    body = lines[9] if len(lines) > 9 else b""
+    if n == 0:
+        return step, cols, np.empty((0, len(cols)))
+    a = np.array(body.split(), dtype=np.float64)
+    if a.size != n * len(cols):
+        raise EngineError(f"{path}: truncated dump ({a.size} numbers for {n} atoms x {len(cols)} columns)")
+    return step, cols, a.reshape(n, len(cols))
+
+
+def write_data_file(path: Path, table_path: Path, lo, hi):
+    """Turn the particle table into a LIGGGHTS ``read_data`` file (atom_style granular:
+    ``id type diameter density x y z``; ``Velocities``: ``id vx vy vz wx wy wz``)."""
+    from orchestrator.atomic import write_text
+    from orchestrator.particles_io import read_particle_table
+    t = read_particle_table(table_path)
+    n = len(t["id"])
+    lo, hi = [float(v) for v in lo], [float(v) for v in hi]
+    f = lambda x: repr(float(x))  # full precision, plain Python floats
+    out = [f"LIGGGHTS data file written by orchestrator from {table_path.name}", "",
+           f"{n} atoms", "2 atom types", "",
+           f"{lo[0]!r} {hi[0]!r} xlo xhi", f"{lo[1]!r} {hi[1]!r} ylo yhi", f"{lo[2]!r} {hi[2]!r} zlo zhi",
+           "", "Atoms", ""]
+    for k in range(n):
+        x, y, z = t["position"][k]
+        out.append(f"{t['id'][k]} 1 {f(2 * t['radius'][k])} {f(t['density'][k])} {f(x)} {f(y)} {f(z)}")
+    out += ["", "Velocities", ""]
+    for k in range(n):
+        vx, vy, vz = t["velocity"][k]
+        out.append(f"{t['id'][k]} {f(vx)} {f(vy)} {f(vz)} 0.0 0.0 0.0")
+    write_text(path, "\n".join(out) + "\n")

@@ -1,0 +1,155 @@
+"""YADE 2023.02 adapter (Debian ``yade``, its own python3.11 and numpy 1.24).
+
+Render: ``templates/yade/<scene>.py.j2``; the script reads the orchestrator's particle table.
+Run: ``yade -n -x script.py`` (``-j N`` threads), progress from ``PROGRESS <iter>`` lines.
+Parse: frame chunks ``dump/chunk.<iter>.npz`` into frames.h5. Resume: ``checkpoint.yade.gz``
+written by ``O.save`` (atomic rename) and reloaded with ``O.load``.
+"""
+from __future__ import annotations
+
+import functools
+import re
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from .base import Engine, EngineError, tail
+from .render import render_template
+
+_PROGRESS = re.compile(r"^PROGRESS (\d+)")
+
+
+class Yade(Engine):
+    name = "yade"
+    executable = "yade"
+    capabilities = {
+        "hertz": "Ip2_FrictMat_FrictMat_MindlinPhys + Law2_ScGeom_MindlinPhys_Mindlin",
+        "restitution_damping": "Mindlin en/es (Tsuji damping), tensile force clipped",
+        "sliding_friction": "Mindlin shear spring with Coulomb limit",
+        "adhesion": "Mindlin includeAdhesion (DMT, F = 4 pi gamma R*, constant per contact)",
+        "plane_wall": "utils.wall",
+        "cylinder_wall": "geom.facetCylinder",
+        "mesh_walls": "ymport.stl / utils.facet",
+        "rotating_walls": "RotationEngine",
+        "servo_wall": "ServoPIDController",
+        "membrane": "GridNode/GridConnection/PFacet with nodal pressure forces",
+        "clumps": "Clump",
+        "particle_stress": "bodyStressTensors()",
+        "contact_output": "O.interactions",
+        "periodic": "O.periodic",
+    }
+    substitutes = {
+        "rolling_friction": {
+            "mindlin_moment": "Mindlin includeMoment: one absolute krot for all contacts, limit from |Fn|, no dashpot",
+        },
+        "rolling_friction_load": {
+            "mindlin_moment": "Mindlin includeMoment with a constant μ_rol at the expected overlap",
+        },
+        "torsion_friction": {
+            "mindlin_ktwist_elastic": "Mindlin ktwist: elastic twisting spring with no limit",
+        },
+        "seed000_damping": {
+            "tsuji_restitution": "Tsuji damping (force ∝ δ^1/4 δ̇) with the restitution that seed 000's "
+                                 "γ_n = sqrt(4/3 E* m*) delivers, instead of force ∝ δ^1/2 δ̇",
+        },
+    }
+
+    @functools.lru_cache(maxsize=1)
+    def version(self) -> str:
+        try:
+            out = subprocess.run([self.executable, "--version"], capture_output=True, text=True, timeout=60).stdout
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise EngineError(f"cannot run {self.executable}: {exc}") from None
+        m = re.search(r"Yade version:\s*(\S+)", out)
+        return f"YADE {m.group(1)}" if m else "unknown"
+
+    def render(self, case, params, run_dir: Path, resume=None) -> Path:
+        run_dir = Path(run_dir)
+        (run_dir / "dump").mkdir(exist_ok=True)
+        sc = params["scene"]
+        o = case.output
+        fields = ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
+                                                 ("orientation", o.orientation), ("force", o.force),
+                                                 ("torque", o.torque)) if on]
+        n = max(1, len(sc.get("ids", [])) or 1)
+        ctx = {
+            "case": case, "p": params, "resume": resume,
+            "files": {k: Path(v).name for k, v in params.get("files", {}).items()},
+            "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
+            "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
+            "yade_fields": fields,
+            # keep a chunk under ~20 MB of doubles
+            "chunk_frames": int(max(1, min(256, 20e6 / (8 * 13 * n)))),
+        }
+        script = run_dir / ("resume.py" if resume else "script.py")
+        render_template(f"yade/{case.scene.kind}.py.j2", ctx, script)
+        return script
+
+    def command(self, deck: Path, case) -> list[str]:
+        return [self.executable, "-n", "-j", str(case.engine_options.threads), "-x", deck.name]
+
+    def progress_step(self, line: str):
+        m = _PROGRESS.match(line)
+        return int(m.group(1)) if m else None
+
+    def explain_failure(self, log: Path) -> str:
+        text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
+        m = re.findall(r'File "(script\.py|resume\.py)", line (\d+)', text)
+        msg = ""
+        if m:
+            fname, line = m[-1]
+            try:
+                src = (Path(log).parent / fname).read_text().splitlines()[int(line) - 1]
+                msg = f"in {fname} line {line}: {src.strip()}\n"
+            except (OSError, IndexError):
+                pass
+        return msg + tail(log)
+
+    def resume_state(self, run_dir: Path):
+        ck = Path(run_dir) / "checkpoint.yade.gz"
+        if not ck.exists():
+            return None
+        return {"checkpoint": ck.name, "candidates": [ck.name]}
+
+    def prepare_resume(self, run_dir: Path, resume: dict):
+        """Drop frame chunks written after the checkpoint (they will be written again)."""
+        ck_time = (Path(run_dir) / "checkpoint.yade.gz").stat().st_mtime
+        for f in (Path(run_dir) / "dump").glob("chunk.*.npz"):
+            if f.stat().st_mtime > ck_time:
+                f.unlink()
+
+    def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
+        from orchestrator.frames import FrameWriter
+        from orchestrator.particles_io import read_particle_table
+        run_dir = Path(run_dir)
+        chunks = sorted((run_dir / "dump").glob("chunk.*.npz"), key=lambda p: int(p.name.split(".")[1]))
+        if not chunks:
+            raise EngineError(f"{run_dir}/dump: YADE wrote no frames\n{tail(run_dir / 'engine.log')}")
+        table = read_particle_table(run_dir / "particles.txt")
+        ids = table["id"]
+        mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
+        from .liggghts import _scene_hook
+        extras = _scene_hook(case, "yade_extras", run_dir, params)
+        controls = extras.get("controls", {})
+        first = np.load(chunks[0])
+        fields = [f for f in ("position", "velocity", "angular_velocity", "orientation", "force", "torque")
+                  if f in first.files]
+        seen = set()
+        with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
+                         controls=controls.keys(), mass=mass, meta=meta) as w:
+            for c in chunks:
+                d = np.load(c)
+                for k in range(len(d["iter"])):
+                    it = int(d["iter"][k])
+                    if it in seen:
+                        continue
+                    seen.add(it)
+                    kk = w.t
+                    w.append(float(d["time"][k]), it,
+                             controls={n: v[kk] if kk < len(v) else np.nan for n, v in controls.items()},
+                             **{f: d[f][k] for f in fields})
+            for name, series in extras.get("walls", {}).items():
+                series = dict(series)
+                w.write_wall(name, series.pop("time"), **series)
+        return run_dir / "frames.h5"

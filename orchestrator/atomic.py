@@ -1,0 +1,33 @@
+"""Atomic file writes: write to ``<name>.partial`` then rename, so no half-written file ever
+carries a final name."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+
+def write_text(path, text: str) -> Path:
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return path
+
+
+def write_json(path, data) -> Path:
+    return write_text(path, json.dumps(data, indent=2, sort_keys=True, default=_default) + "\n")
+
+
+def _default(o):
+    try:
+        import numpy as np
+        if isinstance(o, np.generic):
+            return o.item()
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -1,0 +1,253 @@
+"""Derived physical parameters: computed once from a case and handed to *both* engines.
+
+Templates do no physics arithmetic; every number in a deck comes from :func:`derive`. All values
+are SI. Formulas:
+
+- effective modulus E* = [(1-ν₁²)/E₁ + (1-ν₂²)/E₂]⁻¹, shear G* = [2(2-ν₁)(1+ν₁)/E₁ +
+  2(2-ν₂)(1+ν₂)/E₂]⁻¹ (Johnson 1985, §4 and §7; the same expressions as LIGGGHTS'
+  ``normal_model_hertz.h``);
+- Hertz impact at relative normal speed v (Johnson 1985, §11.4): maximum overlap
+  δ_max = (15 m* v² / (16 E* √R*))^(2/5), contact time t_c = 2.868 (m*²/(R* E*² v))^(1/5),
+  peak force F_max = 4/3 E* √R* δ_max^(3/2);
+- Rayleigh time step dt_R = π R_min √(ρ/G) / (0.1631 ν + 0.8766) (Li, Xu & Thornton 2005);
+- viscous damping from restitution (Tsuji et al. 1992): both engines use
+  c_n = -2 √(5/6) β √(2 E* √(R* δ) m*), β = ln e / √(ln² e + π²) and clip tensile normal forces.
+  With that law the *delivered* restitution differs from the e fed in (by 5 % at e = 0.5), so
+  :func:`restitution_input` integrates the dimensionless contact once and inverts it: the engines
+  receive the e that delivers the requested one.
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+
+class DerivationError(ValueError):
+    """A case whose derived numbers are unsafe (time step above the critical one, …)."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Elastic contact (Hertz)
+# ----------------------------------------------------------------------------------------------
+def effective_modulus(E1: float, nu1: float, E2: float, nu2: float) -> float:
+    """E* [Pa] of two elastic bodies (Johnson 1985 eq. 4.22)."""
+    return 1.0 / ((1 - nu1 ** 2) / E1 + (1 - nu2 ** 2) / E2)
+
+
+def effective_shear_modulus(E1: float, nu1: float, E2: float, nu2: float) -> float:
+    """G* [Pa] for the Mindlin tangential stiffness k_t = 8 G* a."""
+    return 1.0 / (2 * (2 - nu1) * (1 + nu1) / E1 + 2 * (2 - nu2) * (1 + nu2) / E2)
+
+
+def reduced(a: float, b: float) -> float:
+    """a b / (a + b); b = inf gives a (a wall's radius or mass)."""
+    if math.isinf(b):
+        return a
+    return a * b / (a + b)
+
+
+def hertz_max_overlap(m_eff: float, R_eff: float, E_eff: float, v: float) -> float:
+    """Largest overlap δ_max [m] of an elastic Hertz impact at normal speed v [m/s]."""
+    return (15 * m_eff * v ** 2 / (16 * E_eff * math.sqrt(R_eff))) ** 0.4
+
+
+def hertz_contact_time(m_eff: float, R_eff: float, E_eff: float, v: float) -> float:
+    """Duration t_c [s] of an elastic Hertz impact: 2.868 (m*²/(R* E*² v))^(1/5)."""
+    return 2.868 * (m_eff ** 2 / (R_eff * E_eff ** 2 * v)) ** 0.2
+
+
+def hertz_peak_force(m_eff: float, R_eff: float, E_eff: float, v: float) -> float:
+    """Peak normal force F_max [N] of an elastic Hertz impact."""
+    d = hertz_max_overlap(m_eff, R_eff, E_eff, v)
+    return 4.0 / 3.0 * E_eff * math.sqrt(R_eff) * d ** 1.5
+
+
+def rayleigh_time_step(R_min: float, density: float, youngs: float, poisson: float) -> float:
+    """Rayleigh-wave time step [s] for the smallest sphere (Li, Xu & Thornton 2005)."""
+    G = youngs / (2 * (1 + poisson))
+    return math.pi * R_min * math.sqrt(density / G) / (0.1631 * poisson + 0.8766)
+
+
+def sliding_limit_tangential_restitution(angle: float, mu: float, e_n: float) -> float:
+    """Rigid-body e_t = 1 - μ(1+e_n)/tan θ of the sphere centre in gross sliding (Chung & Ooi
+    2011, test 4; valid for tan θ ≥ 7/2 μ (1+e_n))."""
+    return 1.0 - mu * (1 + e_n) / math.tan(angle)
+
+
+def sliding_threshold_angle(mu: float, e_n: float) -> float:
+    """Incidence angle [rad] above which a sphere slides throughout the impact: tan θ = 7/2 μ (1+e)."""
+    return math.atan(3.5 * mu * (1 + e_n))
+
+
+# ----------------------------------------------------------------------------------------------
+# Restitution under Tsuji damping with tensile clipping
+# ----------------------------------------------------------------------------------------------
+def tsuji_beta(e: float) -> float:
+    """β = ln e / √(ln² e + π²) (LIGGGHTS and YADE Mindlin)."""
+    if e >= 1.0:
+        return 0.0
+    le = math.log(e)
+    return le / math.sqrt(le * le + math.pi ** 2)
+
+
+def _e_from_beta_input(beta: float) -> float:
+    """Inverse of :func:`tsuji_beta`: the e fed in that gives ``beta``."""
+    if beta == 0.0:
+        return 1.0
+    return math.exp(math.pi * beta / math.sqrt(1 - beta * beta))
+
+
+@functools.lru_cache(maxsize=256)
+def delivered_restitution(e_input: float) -> float:
+    """Restitution actually delivered by Hertz + Tsuji damping + tensile clipping when ``e_input``
+    is given to the engine. Independent of speed, size and stiffness (the law is scale-free), so
+    one dimensionless integration (m* = 1, 4/3 E*√R* = 1, v = 1) suffices."""
+    beta = tsuji_beta(e_input)
+    if beta == 0.0:
+        return 1.0
+    c = 2 * math.sqrt(5 / 6) * abs(beta) * math.sqrt(2 * 0.75)   # E* = 3/4, R* = m* = 1
+
+    def force(x, v):
+        return x ** 1.5 + c * x ** 0.25 * v if x > 0 else 0.0
+
+    def rhs(t, y):
+        return [y[1], -max(force(max(y[0], 0.0), y[1]), 0.0)]
+
+    def zero_force(t, y):                 # the clipped force vanishes while separating
+        return force(max(y[0], 1e-300), y[1]) if y[1] < 0 else 1.0
+    zero_force.terminal = True
+    zero_force.direction = -1
+
+    def left(t, y):
+        return y[0]
+    left.terminal = True
+    left.direction = -1
+    sol = solve_ivp(rhs, (0, 50), [1e-12, 1.0], events=[zero_force, left], rtol=1e-10, atol=1e-13,
+                    max_step=0.01)
+    return float(-sol.y[1, -1])
+
+
+def restitution_input(e_target: float) -> float:
+    """The restitution to give LIGGGHTS (``coefficientRestitution``) and YADE (Mindlin ``en``)
+    so that a collision delivers ``e_target`` (see module docstring)."""
+    if e_target >= 1.0:
+        return 1.0
+    f = lambda e_in: delivered_restitution(round(e_in, 12)) - e_target
+    lo, hi = 1e-4, 1.0 - 1e-9
+    if f(lo) > 0:
+        raise DerivationError(f"restitution {e_target} is below what Tsuji damping with clipping can deliver "
+                              f"({delivered_restitution(lo):.3f})")
+    return float(brentq(f, lo, hi, xtol=1e-10))
+
+
+# ----------------------------------------------------------------------------------------------
+# YADE's Mindlin reduced radius at walls
+# ----------------------------------------------------------------------------------------------
+#: YADE's Ip2_FrictMat_FrictMat_MindlinPhys takes r_eff = R1 R2/(R1+R2) from the contact geometry:
+#: a Wall gives R/2, a Facet (refR1 = 2R) gives 2R/3, instead of the flat-wall Hertz value R
+#: that LIGGGHTS uses. Measured: a sphere on a utils.wall had a Hertz contact time 2^(1/5) = 1.149
+#: times too long.
+YADE_WALL_RADIUS_RATIO = {"wall": 0.5, "facet": 2.0 / 3.0}
+#: a rigid plane in YADE is a fixed sphere this many times larger than the largest particle
+#: (r_eff = R (1 - 1e-6)); the plane's sag over a particle-size patch is ~1e-6 R.
+YADE_PLANE_SPHERE_FACTOR = 1e6
+
+
+def yade_wall_young(E: float, nu: float, E_eff_target: float, nu_wall: float, kind: str = "facet") -> float:
+    """Young's modulus [Pa] to give a YADE wall of ``kind`` so that Mindlin's k_n = 4/3 E* √r_eff
+    (and its Tsuji damping) equals the flat-wall Hertz value with ``E_eff_target``: YADE uses
+    r_eff = ratio·R, so its E* must be E_eff_target/√ratio. Raises DerivationError when no
+    positive modulus can do it (a near-rigid wall): use a large fixed sphere instead."""
+    ratio = YADE_WALL_RADIUS_RATIO[kind]
+    need = E_eff_target / math.sqrt(ratio)
+    inv = 1.0 / need - (1 - nu ** 2) / E
+    if inv <= 0:
+        raise DerivationError(f"a YADE {kind} wall cannot reproduce E* = {E_eff_target:.3e} Pa at r_eff = R "
+                              f"(it would need E* = {need:.3e} Pa > E/(1-nu^2) = {E / (1 - nu ** 2):.3e} Pa)")
+    return (1 - nu_wall ** 2) / inv
+
+
+# ----------------------------------------------------------------------------------------------
+# The case -> parameters
+# ----------------------------------------------------------------------------------------------
+#: a Hertz collision is resolved when it spans at least this many steps (O'Sullivan & Bray 2004
+#: show central-difference error below 1 % from ~ 10 steps per contact); the critical step is t_c/10.
+HERTZ_STEPS_PER_CONTACT = 10
+
+
+def wall_material(case) -> tuple[float, float]:
+    """(E_wall [Pa], ν_wall) from the case's ``wall`` section."""
+    from .case import RigidWall
+    w = case.wall
+    if isinstance(w, RigidWall):
+        return case.material.youngs_modulus * w.stiffness_ratio, w.poisson_ratio
+    return w.youngs_modulus, w.poisson_ratio
+
+
+def derive(case) -> dict:
+    """All numbers the templates need, as a JSON-able dict (SI units)."""
+    from .scenes import scene_module
+    mod = scene_module(case.scene.kind)
+    mat = case.material
+    E, nu, rho = mat.youngs_modulus, mat.poisson_ratio, mat.density
+    Ew, nuw = wall_material(case)
+    r_min, r_max = size_range(case)
+    m_min = rho * 4 / 3 * math.pi * r_min ** 3
+    E_pp = effective_modulus(E, nu, E, nu)
+    E_pw = effective_modulus(E, nu, Ew, nuw)
+    G_pp = effective_shear_modulus(E, nu, E, nu)
+    G_pw = effective_shear_modulus(E, nu, Ew, nuw)
+    e_target = case.contact.restitution
+    e_in = restitution_input(e_target)
+    v_max = float(mod.max_velocity(case))
+    dt_R = rayleigh_time_step(r_min, rho, E, nu)
+    # Hertz limit: smallest pair (m* = m/2, R* = r/2) and smallest sphere on a wall at v_max
+    tc_pp = hertz_contact_time(m_min / 2, r_min / 2, E_pp, v_max) if v_max > 0 else math.inf
+    tc_pw = hertz_contact_time(m_min, r_min, E_pw, v_max) if v_max > 0 else math.inf
+    dt_H = min(tc_pp, tc_pw) / HERTZ_STEPS_PER_CONTACT
+    dt_crit = min(dt_R, dt_H)
+    ts = case.timestep
+    dt = ts.dt if ts.dt is not None else ts.fraction * dt_crit
+    if dt > dt_crit and not ts.allow_unsafe:
+        raise DerivationError(
+            f"timestep: dt = {dt:.3e} s is above the critical time step {dt_crit:.3e} s "
+            f"(Rayleigh {dt_R:.3e} s for r_min = {r_min:.3e} m; Hertz t_c/{HERTZ_STEPS_PER_CONTACT} = "
+            f"{dt_H:.3e} s at v = {v_max:.3g} m/s); use timestep.fraction <= 0.3 or a dt below "
+            f"{0.3 * dt_crit:.3e} s, or set timestep.allow_unsafe: true")
+    kt_ratio = case.contact.tangential_stiffness_ratio
+    params = {
+        "material": {"E": E, "nu": nu, "rho": rho, "G": E / (2 * (1 + nu))},
+        "wall": {"E": Ew, "nu": nuw},
+        "E_eff_pp": E_pp, "E_eff_pw": E_pw, "G_eff_pp": G_pp, "G_eff_pw": G_pw,
+        "restitution": {"target": e_target, "engine_input": e_in, "beta": tsuji_beta(e_in)},
+        "friction": case.contact.friction,
+        "tangential_stiffness_ratio": kt_ratio,
+        "r_min": r_min, "r_max": r_max,
+        "dt": dt, "dt_rayleigh": dt_R, "dt_hertz": dt_H, "dt_critical": dt_crit,
+        "dt_fraction": dt / dt_crit, "v_max": v_max,
+        "gravity": case.gravity, "gravity_vector": [0.0, 0.0, -case.gravity],
+        "features": list(mod.required_features(case)),
+    }
+    params["scene"] = mod.derive(case, params)
+    lo = params["scene"].get("box_lo")
+    hi = params["scene"].get("box_hi")
+    if lo is not None and hi is not None:
+        Rb = YADE_PLANE_SPHERE_FACTOR * r_max
+        c = [(a + b) / 2 for a, b in zip(lo, hi)]
+        params["yade_plane_radius"] = Rb
+        params["yade_plane_center"] = [c[0], c[1], -Rb]   # touches the plane z = 0 from below
+    return params
+
+
+def size_range(case) -> tuple[float, float]:
+    """(r_min, r_max) [m] of the case's particles."""
+    from .scenes import scene_module
+    mod = scene_module(case.scene.kind)
+    if hasattr(mod, "size_range"):
+        return mod.size_range(case)
+    r = case.scene.radius
+    return r, r

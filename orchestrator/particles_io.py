@@ -1,0 +1,36 @@
+"""The particle table the orchestrator samples once and hands identically to both engines.
+
+Plain text, one particle per line: ``id radius density x y z vx vy vz`` in SI, written
+atomically. YADE reads it with ``numpy.loadtxt``; the LIGGGHTS adapter turns it into a
+``read_data`` file.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+HEADER = "id radius[m] density[kg/m^3] x[m] y[m] z[m] vx[m/s] vy[m/s] vz[m/s]"
+
+
+def write_particle_table(path, ids, radius, density, position, velocity=None) -> Path:
+    """Write the table atomically; scalars broadcast over particles."""
+    ids = np.asarray(ids, dtype=np.int64)
+    n = len(ids)
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), (n,))
+    density = np.broadcast_to(np.asarray(density, dtype=float), (n,))
+    position = np.asarray(position, dtype=float).reshape(n, 3)
+    velocity = np.zeros((n, 3)) if velocity is None else np.asarray(velocity, dtype=float).reshape(n, 3)
+    table = np.column_stack([ids, radius, density, position, velocity])
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    np.savetxt(tmp, table, fmt=["%d"] + ["%.17g"] * 8, header=HEADER)
+    os.replace(tmp, path)
+    return path
+
+
+def read_particle_table(path) -> dict:
+    a = np.loadtxt(path, ndmin=2)
+    return {"id": a[:, 0].astype(np.int64), "radius": a[:, 1], "density": a[:, 2],
+            "position": a[:, 3:6], "velocity": a[:, 6:9]}

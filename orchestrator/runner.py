@@ -1,0 +1,197 @@
+"""Run a case on an engine: ``runs/<case>/<engine>-<hash>/`` with the resolved case, derived
+parameters, rendered deck, engine log, frames.h5 and summary.json.
+
+The hash covers the resolved case, the engine and its version, and the templates. A complete run
+is reused unless ``force``; an interrupted run resumes from its last restart/checkpoint. Every
+file is written under a temporary name and renamed.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from engines import get_engine
+from engines.base import EngineError
+from engines.render import templates_hash
+
+from .atomic import write_json, write_text
+from .case import Case
+from .derive import derive
+from .particles_io import write_particle_table
+
+#: measured single-core throughput [particle-steps/s] used for run-time estimates when no
+#: benchmark result is stored (ENGINES.md: 2000 dense Hertz spheres on this machine).
+DEFAULT_THROUGHPUT = {"liggghts": 6e6, "yade": 1.5e6}
+
+
+@dataclass
+class RunOutcome:
+    run_dir: Path
+    status: str
+    summary: dict
+    reused: bool = False
+
+    @property
+    def frames(self):
+        from .frames import Frames
+        return Frames(self.run_dir / "frames.h5")
+
+
+def run_hash(case: Case, engine_name: str, engine_version: str) -> str:
+    h = hashlib.sha256()
+    h.update(case.hash_input().encode())
+    h.update(engine_name.encode())
+    h.update(engine_version.encode())
+    h.update(templates_hash(engine_name, case.scene.kind).encode())
+    return h.hexdigest()[:12]
+
+
+def run_dir_for(case: Case, engine_name: str, runs_root="runs") -> Path:
+    eng = get_engine(engine_name)
+    return Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, eng.version())}"
+
+
+def read_summary(run_dir) -> dict | None:
+    p = Path(run_dir) / "summary.json"
+    if not p.exists():
+        return None
+    return json.loads(p.read_text())
+
+
+def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
+    """Engine wall time [s] estimated from the derived step count, particle count and the
+    engine's throughput (benchmarks/throughput.json when measured, else ENGINES.md figures)."""
+    tp = dict(DEFAULT_THROUGHPUT)
+    stored = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.json"
+    if stored.exists():
+        tp.update(json.loads(stored.read_text()))
+    sc = params["scene"]
+    n = sc.get("n", len(sc.get("ids", [])))
+    steps = sc.get("total_steps", sc["steps"])
+    ranks = case.engine_options.mpi_ranks if engine_name == "liggghts" else case.engine_options.threads
+    return steps * max(n, 1) / (tp[engine_name] * ranks)
+
+
+def prepare(case: Case, engine_name: str, run_dir: Path) -> tuple[dict, list]:
+    """Derive parameters, check capabilities, write case/params/particles. Returns (params, subs)."""
+    from .scenes import scene_module
+    eng = get_engine(engine_name)
+    params = derive(case)
+    subs = eng.check(params["features"], case.contact.substitutes)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
+    mod = scene_module(case.scene.kind)
+    if hasattr(mod, "prepare"):
+        params["files"] = mod.prepare(case, params, run_dir) or {}
+    elif not (run_dir / "particles.txt").exists():
+        sc = params["scene"]
+        write_particle_table(run_dir / "particles.txt", sc["ids"], sc["radius"], case.material.density,
+                             sc["position"], sc.get("velocity"))
+    write_json(run_dir / "params.json", params)
+    return params, subs
+
+
+def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False, dry_run: bool = False,
+             progress: bool | None = None, analyze: bool = True) -> RunOutcome:
+    """Render, run, parse (and analyse) one case on one engine."""
+    eng = get_engine(engine_name)
+    if not eng.available():
+        raise EngineError(f"{engine_name} is not installed (no '{eng.executable}' on PATH); "
+                          "run the README's set-up command")
+    version = eng.version()
+    run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version)}"
+    old = read_summary(run_dir)
+    if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
+        return RunOutcome(run_dir, "complete", old, reused=True)
+    if force and run_dir.exists():
+        shutil.rmtree(run_dir)
+    timings = {}
+    t0 = time.perf_counter()
+    params, subs = prepare(case, engine_name, run_dir)
+    resume = None if dry_run else eng.resume_state(run_dir)
+    if resume and hasattr(eng, "prepare_resume"):
+        eng.prepare_resume(run_dir, resume)
+    deck = eng.render(case, params, run_dir, resume=resume)
+    if resume is None:
+        # a fresh run also gets the fresh deck rendered as deck.in/script.py for reference
+        pass
+    timings["render"] = time.perf_counter() - t0
+    estimate = estimate_wall_time(case, params, engine_name)
+    summary = {
+        "case": case.name, "case_source": case.source, "engine": engine_name, "engine_version": version,
+        "run_dir": str(run_dir), "deck": deck.name, "status": "rendered" if dry_run else "running",
+        "steps": params["scene"].get("total_steps", params["scene"]["steps"]),
+        "dt": params["dt"], "dt_critical": params["dt_critical"], "dt_fraction": params["dt_fraction"],
+        "estimated_engine_time_s": estimate,
+        "substitutions": [s.as_dict() for s in subs],
+        "wall_time": timings, "resumed_from": resume,
+    }
+    if dry_run:
+        write_json(run_dir / "summary.json", summary)
+        return RunOutcome(run_dir, "rendered", summary)
+    write_json(run_dir / "summary.json", summary)
+    progress = case.engine_options.progress if progress is None else progress
+    t1 = time.perf_counter()
+    try:
+        res = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress)
+    except EngineError as exc:
+        summary["status"] = "failed"
+        summary["error"] = str(exc)
+        summary["wall_time"]["engine"] = time.perf_counter() - t1
+        write_json(run_dir / "summary.json", summary)
+        raise
+    timings["engine"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    meta = {
+        "engine": engine_name, "engine_version": version, "case": case.resolved(),
+        "deck_hash": hashlib.sha256(deck.read_bytes()).hexdigest(),
+        "template_hash": templates_hash(engine_name, case.scene.kind), "source": "simulation",
+        "substitutions": [s.as_dict() for s in subs], "dt": params["dt"],
+    }
+    eng.parse(case, params, run_dir, meta)
+    timings["parse"] = time.perf_counter() - t2
+    summary["status"] = "complete"
+    summary["steps_run"] = res.steps
+    if analyze and case.analysis:
+        t3 = time.perf_counter()
+        summary["analysis"] = run_case_analyses(case, run_dir)
+        timings["analysis"] = time.perf_counter() - t3
+    timings["total"] = sum(v for k, v in timings.items() if k != "total")
+    summary["wall_time"] = timings
+    write_json(run_dir / "summary.json", summary)
+    return RunOutcome(run_dir, "complete", summary)
+
+
+def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
+    """Run; if resuming from the newest restart fails (e.g. it was half-written when the run was
+    killed), try the older ones, then start afresh."""
+    log = run_dir / "engine.log"
+    total = params["scene"].get("total_steps", params["scene"]["steps"])
+    timeout = case.engine_options.timeout
+    candidates = (resume or {}).get("candidates", [])
+    for cand in candidates[1:] + [None]:
+        try:
+            return eng.run(deck, case, total, log, timeout, progress)
+        except EngineError:
+            if resume is None:
+                raise
+            write_text(log.with_suffix(".resume-failed.log"), log.read_text(errors="replace") if log.exists() else "")
+            resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand)
+            deck = eng.render(case, params, run_dir, resume=resume)
+    raise EngineError("unreachable")  # pragma: no cover
+
+
+def run_case_analyses(case: Case, run_dir: Path) -> dict:
+    """Run the case's ``analysis:`` list on the run's frames (orchestrator.analysis)."""
+    from .frames import Frames
+    try:
+        from .analysis import run_analyses
+    except ImportError as exc:  # analysis package not available
+        return {"error": f"analysis unavailable: {exc}"}
+    return run_analyses(Frames(run_dir / "frames.h5"), case.analysis, run_dir / "analysis")
