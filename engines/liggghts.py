@@ -62,7 +62,10 @@ class Liggghts(Engine):
     @functools.lru_cache(maxsize=1)
     def version(self) -> str:
         try:
-            out = subprocess.run([self.executable, "-h"], capture_output=True, text=True, timeout=30).stdout
+            import tempfile
+            with tempfile.TemporaryDirectory() as tmp:   # `liggghts -h` leaves a log.liggghts behind
+                out = subprocess.run([self.executable, "-h"], capture_output=True, text=True, timeout=30,
+                                     cwd=tmp).stdout
         except (OSError, subprocess.TimeoutExpired) as exc:
             raise EngineError(f"cannot run {self.executable}: {exc}") from None
         m = re.search(r"Version (LIGGGHTS-PUBLIC [^,]+)", out)
