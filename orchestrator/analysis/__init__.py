@@ -1,0 +1,121 @@
+"""Analysis of particle frames (simulation or CT), every measure of the two seed papers.
+
+Each measure is an array function (arrays in, arrays/DataFrames out, SI) plus an
+``analyze_<measure>(frames, **options) -> Result`` wrapper registered in :data:`ANALYSES`.
+A :class:`~._common.Result` holds DataFrames (``.tables``), scalars and ``.plot() -> Figure``.
+
+>>> from orchestrator import load
+>>> from orchestrator.analysis import ANALYSES, run_analyses
+>>> fr = load("runs/triaxial_small/liggghts-abc")                    # doctest: +SKIP
+>>> res = ANALYSES["d2min"](fr, interval=0.01)                        # doctest: +SKIP
+>>> res.tables["particles"].head(); res.plot()                        # doctest: +SKIP
+>>> run_analyses(fr, ["rdf", {"d2min": {"interval": 0.01}}], "out/")  # doctest: +SKIP
+
+This package works on frames and arrays only; it never imports the engines.
+"""
+from __future__ import annotations
+
+import time
+import traceback
+from pathlib import Path
+
+from ._common import Result, atomic_savefig, atomic_write_csv, atomic_write_json
+from .clusters import analyze_clusters
+from .coordination import analyze_coordination
+from .d2min import analyze_d2min
+from .displacements import analyze_displacements
+from .fabric import analyze_fabric
+from .forcechains import analyze_forcechains
+from .friction import analyze_friction
+from .profiles import analyze_profiles
+from .rdf import analyze_rdf
+from .shearband import analyze_shearband
+from .stress import analyze_stress
+
+__all__ = ["ANALYSES", "run_analyses", "parse_specs", "Result"]
+
+#: name -> callable(frames, **options) -> Result
+ANALYSES = {
+    "profiles": analyze_profiles,
+    "shearband": analyze_shearband,
+    "friction": analyze_friction,
+    "displacements": analyze_displacements,
+    "d2min": analyze_d2min,
+    "clusters": analyze_clusters,
+    "rdf": analyze_rdf,
+    "coordination": analyze_coordination,
+    "fabric": analyze_fabric,
+    "forcechains": analyze_forcechains,
+    "stress": analyze_stress,
+}
+
+
+def parse_specs(specs) -> list[tuple[str, dict]]:
+    """Normalise a case's ``analysis:`` list: each entry a name or ``{name: {options}}``.
+
+    Raises ValueError naming the entry when a name is unknown or options are not a mapping.
+    """
+    if specs is None:
+        return []
+    if isinstance(specs, (str, dict)):
+        specs = [specs]
+    out = []
+    for n, s in enumerate(specs):
+        if isinstance(s, str):
+            name, opts = s, {}
+        elif isinstance(s, dict) and len(s) == 1:
+            (name, opts), = s.items()
+            opts = {} if opts is None else opts
+            if not isinstance(opts, dict):
+                raise ValueError(f"analysis[{n}] ({name}): options must be a mapping, got {type(opts).__name__}")
+        else:
+            raise ValueError(f"analysis[{n}]: expected a name or {{name: {{options}}}}, got {s!r}")
+        if name not in ANALYSES:
+            raise ValueError(f"analysis[{n}]: unknown analysis {name!r}; known: {sorted(ANALYSES)}")
+        out.append((name, dict(opts)))
+    return out
+
+
+def run_analyses(frames, specs, out_dir, plots: bool = True, raise_errors: bool = False) -> dict:
+    """Run a case's ``analysis:`` list on ``frames`` and write results into ``out_dir``.
+
+    For each entry, every table is written as ``<label>_<table>.csv`` and the plot as
+    ``<label>.png`` (atomically: temporary file, then :func:`os.replace`); ``<label>`` is the
+    analysis name, suffixed ``_2``, ``_3`` … when a name appears more than once. The summary is
+    also written to ``analysis_summary.json``.
+
+    An analysis that fails is recorded with ``status: "error"`` and its message, and the others
+    still run (set ``raise_errors`` to stop at the first failure). Unknown names are rejected
+    before anything runs.
+
+    Returns ``{label: {"name", "status", "options", "scalars", "files", "seconds", ["error"]}}``.
+    """
+    if not hasattr(frames, "position"):
+        from ..frames import Frames
+        frames = Frames(frames)
+    parsed = parse_specs(specs)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary, seen = {}, {}
+    for name, opts in parsed:
+        seen[name] = seen.get(name, 0) + 1
+        label = name if seen[name] == 1 else f"{name}_{seen[name]}"
+        t0 = time.perf_counter()
+        entry = {"name": name, "options": opts, "files": []}
+        try:
+            res = ANALYSES[name](frames, **opts)
+            for tname, df in res.tables.items():
+                entry["files"].append(atomic_write_csv(df, out / f"{label}_{tname}.csv").name)
+            if plots:
+                fig = res.plot()
+                entry["files"].append(atomic_savefig(fig, out / f"{label}.png").name)
+            entry.update(status="ok", scalars=res.scalars, resolved_options=res.options)
+        except Exception as e:  # noqa: BLE001 - recorded, reported, and optionally re-raised
+            if raise_errors:
+                raise
+            entry.update(status="error", error=f"{type(e).__name__}: {e}",
+                         traceback=traceback.format_exc(limit=3))
+        entry["seconds"] = round(time.perf_counter() - t0, 3)
+        summary[label] = entry
+    atomic_write_json(summary, out / "analysis_summary.json")
+    return summary

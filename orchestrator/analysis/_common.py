@@ -1,0 +1,203 @@
+"""Shared helpers of the analysis package: result container, frame selection, sizes, geometry.
+
+Nothing here is a measure; each measure lives in its own module.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["Result", "present", "d50", "control_values", "frame_pairs", "frame_indices",
+           "atomic_write_csv", "atomic_savefig", "atomic_write_json", "sphere_volume"]
+
+
+@dataclass
+class Result:
+    """What every analysis returns (trackpy-like tables plus scalars and a plot).
+
+    Attributes
+    ----------
+    name : registry name of the measure.
+    tables : name -> :class:`pandas.DataFrame` (written as ``<name>_<table>.csv``).
+    scalars : name -> float/str summary values (JSON-serialisable), e.g. a fit parameter.
+    arrays : name -> ndarray kept for notebooks (not written).
+    options : the options the analysis ran with (after defaults were filled in).
+    """
+    name: str
+    tables: dict = field(default_factory=dict)
+    scalars: dict = field(default_factory=dict)
+    arrays: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+    plotter: Callable | None = field(default=None, repr=False)
+
+    def plot(self, **kw):
+        """Return a matplotlib Figure of this result (Agg backend; never shows a window)."""
+        if self.plotter is None:
+            raise NotImplementedError(f"{self.name}: no plot")
+        return self.plotter(self, **kw)
+
+    def __getitem__(self, key):
+        if key in self.tables:
+            return self.tables[key]
+        if key in self.scalars:
+            return self.scalars[key]
+        return self.arrays[key]
+
+    def __repr__(self):
+        t = ", ".join(f"{k}[{len(v)}]" for k, v in self.tables.items())
+        return f"Result({self.name!r}, tables: {t}, scalars: {self.scalars})"
+
+
+def present(position: np.ndarray) -> np.ndarray:
+    """Boolean mask of rows that are present (no NaN coordinate); works on (N,3) or (T,N,3)."""
+    return ~np.isnan(position).any(axis=-1)
+
+
+def sphere_volume(radius) -> np.ndarray:
+    """Volume of spheres of the given radii [m^3]."""
+    return 4.0 / 3.0 * np.pi * np.asarray(radius, dtype=float) ** 3
+
+
+def d50(radius: np.ndarray, weighting: str = "number") -> float:
+    """Median particle diameter [m] (``weighting="volume"`` gives x50,3 of seed 000)."""
+    d = 2.0 * np.asarray(radius, dtype=float)
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        raise ValueError("no particle radii")
+    if weighting == "number":
+        return float(np.median(d))
+    if weighting == "volume":
+        order = np.argsort(d)
+        w = np.cumsum(d[order] ** 3)
+        return float(d[order][np.searchsorted(w, 0.5 * w[-1])])
+    raise ValueError(f"weighting must be 'number' or 'volume', got {weighting!r}")
+
+
+def control_values(frames, control: str | None = None) -> tuple[str, np.ndarray]:
+    """The per-frame control series used to label states: ``control`` if given, else the first
+    of axial_strain, angle, shear_strain present in the frames, else time."""
+    if control is not None:
+        if control == "time":
+            return "time", np.asarray(frames.time, float)
+        if control not in frames.controls:
+            raise KeyError(f"{frames.path}: no control {control!r}; controls: {sorted(frames.controls)} (or 'time')")
+        return control, np.asarray(frames.controls[control], float)
+    for c in ("axial_strain", "angle", "shear_strain"):
+        if c in frames.controls and np.isfinite(frames.controls[c]).any():
+            return c, np.asarray(frames.controls[c], float)
+    return "time", np.asarray(frames.time, float)
+
+
+def _nearest(values: np.ndarray, target: float) -> int:
+    d = np.abs(values - target)
+    d[~np.isfinite(d)] = np.inf
+    return int(np.argmin(d))
+
+
+def frame_indices(frames, at=None, control=None, stride: int = 1) -> list[int]:
+    """Frame indices to analyse. ``at``: list of frame indices (int) or of control values
+    (float, nearest frame is taken, e.g. ``at=[0.01, 0.05]`` axial strain); default: every
+    ``stride``-th frame."""
+    T = frames.n_frames
+    if at is None:
+        return list(range(0, T, max(int(stride), 1)))
+    _, vals = control_values(frames, control)
+    out = []
+    for a in np.atleast_1d(at):
+        if isinstance(a, (int, np.integer)) and not isinstance(a, bool):
+            out.append(range(T)[int(a)])
+        else:
+            out.append(_nearest(vals, float(a)))
+    return out
+
+
+def frame_pairs(frames, pairs=None, interval=None, start=None, control=None, stride: int = 1) -> list[tuple[int, int]]:
+    """(reference, current) frame index pairs for incremental measures.
+
+    - ``pairs``: explicit ``[[k0, k1], ...]``;
+    - ``interval``: a control increment (e.g. 0.01 axial strain, seed 001 uses 1 %): for every
+      start state (``start`` list of control values, default every frame) the current frame is the
+      one nearest to control + interval;
+    - default: consecutive frames ``(k, k + stride)``.
+    """
+    T = frames.n_frames
+    if T < 2:
+        raise ValueError(f"{frames.path}: an incremental measure needs at least 2 frames, got {T}")
+    if pairs is not None:
+        return [(range(T)[int(a)], range(T)[int(b)]) for a, b in pairs]
+    if interval is not None:
+        _, vals = control_values(frames, control)
+        starts = (frame_indices(frames, start, control) if start is not None
+                  else list(range(0, T, max(int(stride), 1))))
+        out = []
+        for k0 in starts:
+            target = vals[k0] + float(interval)
+            k1 = _nearest(vals, target)
+            if k1 != k0 and abs(vals[k1] - target) <= 0.5 * abs(float(interval)):
+                out.append((k0, k1))
+        if not out:
+            raise ValueError(f"no frame pair spans a control interval of {interval} (control range "
+                             f"{np.nanmin(vals):g} .. {np.nanmax(vals):g})")
+        return out
+    s = max(int(stride), 1)
+    return [(k, k + s) for k in range(0, T - s, s)]
+
+
+# ----------------------------------------------------------------------------- atomic output
+
+def _tmp_in(path: Path, suffix: str):
+    fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=suffix, dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def atomic_write_csv(df: pd.DataFrame, path) -> Path:
+    """Write a DataFrame as CSV via a temporary file and :func:`os.replace`."""
+    path = Path(path)
+    tmp = _tmp_in(path, ".csv")
+    try:
+        df.to_csv(tmp, index=False)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def atomic_savefig(fig, path, dpi: int = 120) -> Path:
+    """Save a matplotlib Figure as PNG via a temporary file and :func:`os.replace`."""
+    path = Path(path)
+    tmp = _tmp_in(path, ".png")
+    try:
+        fig.savefig(tmp, dpi=dpi, format="png")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def atomic_write_json(obj, path) -> Path:
+    path = Path(path)
+    tmp = _tmp_in(path, ".json")
+    try:
+        tmp.write_text(json.dumps(obj, indent=2, default=_json_default))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return None if not np.isfinite(o) else float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
