@@ -1,0 +1,339 @@
+"""Synthetic tomograms with ground truth: render grains into grey-value volumes.
+
+Everything here works in SI units (positions and radii in metres) and renders into a voxel grid
+with the conventions of :mod:`orchestrator.ct.io` (volume ``[z, y, x]``, voxel centres at
+``origin + voxel_size * (i, j, k)``).
+
+Rendering is in two steps:
+
+1. :func:`render_phase` gives the solid fraction of every voxel in [0, 1] with partial-volume
+   accuracy: voxels cut by a grain surface are supersampled (``supersample**3`` points each),
+   voxels inside or outside are set exactly.
+2. :func:`acquire` turns solid fraction into grey values like a CT scanner: grey levels of pore and
+   solid, a Gaussian point-spread function, a linear intensity drift along z, Gaussian noise and
+   quantisation to uint16.
+
+Grains are spheres (``radius``) or star-shaped irregular grains described by spherical-harmonic
+coefficients (see :mod:`orchestrator.ct.shape`), optionally hollow.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from .io import Scan
+
+__all__ = ["pack_spheres", "render_phase", "acquire", "render_scan", "render_sequence",
+           "random_sh_grains", "twist", "scans_from_frames", "Grain"]
+
+
+# ------------------------------------------------------------------------------------- packings
+
+def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-3):
+    """Place spheres without overlap inside a box or a cylinder (overlap relaxation).
+
+    radii : (N,) radii [m].
+    box : ((x0, y0, z0), (x1, y1, z1)) [m]; or
+    cylinder : (cx, cy, R, z0, z1) [m], axis along z.
+    Returns centres (N, 3) [m]. The largest remaining overlap is below ``tol`` times the mean radius
+    (a :class:`RuntimeError` otherwise: the packing is too dense for this simple relaxation).
+    """
+    rng = np.random.default_rng(seed)
+    r = np.asarray(radii, dtype=float)
+    n = len(r)
+    if box is not None:
+        lo, hi = np.asarray(box[0], float), np.asarray(box[1], float)
+        x = lo + r[:, None] + rng.random((n, 3)) * (hi - lo - 2 * r[:, None])
+    elif cylinder is not None:
+        cx, cy, R, z0, z1 = cylinder
+        rho = (R - r) * np.sqrt(rng.random(n))
+        phi = rng.random(n) * 2 * np.pi
+        x = np.column_stack([cx + rho * np.cos(phi), cy + rho * np.sin(phi),
+                             z0 + r + rng.random(n) * (z1 - z0 - 2 * r)])
+    else:
+        raise ValueError("give box or cylinder")
+    rmax = r.max()
+    worst = np.inf
+    for it in range(iterations):
+        tree = cKDTree(x)
+        pairs = tree.query_pairs(2 * rmax, output_type="ndarray")
+        if len(pairs):
+            i, j = pairs[:, 0], pairs[:, 1]
+            d = x[j] - x[i]
+            dist = np.linalg.norm(d, axis=1)
+            ov = r[i] + r[j] - dist
+            m = ov > 0
+            i, j, d, dist, ov = i[m], j[m], d[m], np.maximum(dist[m], 1e-12 * rmax), ov[m]
+            worst = ov.max() if len(ov) else 0.0
+            push = (d / dist[:, None]) * (0.5 * 1.02 * ov)[:, None]
+            dx = np.zeros_like(x)
+            np.add.at(dx, i, -push)
+            np.add.at(dx, j, push)
+            x += dx
+        else:
+            worst = 0.0
+        # walls
+        if box is not None:
+            x = np.clip(x, lo + r[:, None], hi - r[:, None])
+        else:
+            cx, cy, R, z0, z1 = cylinder
+            v = x[:, :2] - (cx, cy)
+            rho = np.linalg.norm(v, axis=1)
+            out = rho > R - r
+            x[out, :2] = (cx, cy) + v[out] * ((R - r[out]) / rho[out])[:, None]
+            x[:, 2] = np.clip(x[:, 2], z0 + r, z1 - r)
+        if worst < tol * r.mean():
+            return x
+    raise RuntimeError(f"pack_spheres: largest overlap still {worst / r.mean():.3g} mean radii after "
+                       f"{iterations} iterations; use fewer or smaller grains")
+
+
+def twist(position, centre_xy, angle):
+    """Rotate positions (N, 3) [m] about the vertical axis through ``centre_xy`` by ``angle`` (N,) [rad]."""
+    p = np.asarray(position, dtype=float).copy()
+    a = np.broadcast_to(np.asarray(angle, dtype=float), (len(p),))
+    v = p[:, :2] - centre_xy
+    c, s = np.cos(a), np.sin(a)
+    p[:, 0] = centre_xy[0] + c * v[:, 0] - s * v[:, 1]
+    p[:, 1] = centre_xy[1] + s * v[:, 0] + c * v[:, 1]
+    return p
+
+
+# ----------------------------------------------------------------------------------- grain shapes
+
+@dataclass
+class Grain:
+    """A star-shaped grain for rendering: centre [m], bounding radius [m], and ``radial(u)`` giving the
+    surface radius [m] along unit vectors u (M, 3) in the grain's own frame; ``rotation`` (3, 3) maps
+    grain frame to world. ``hollow`` is the inner/outer radius ratio of a concentric void (0 = solid)."""
+    centre: np.ndarray
+    rmax: float
+    radial: object = None       # callable(u (M,3)) -> (M,) radii [m]; None = sphere of radius rmax
+    rotation: np.ndarray | None = None
+    hollow: float = 0.0
+
+
+class _GridRadial:
+    """r(theta, phi) tabulated on a regular grid, bilinear interpolation (periodic in phi)."""
+
+    def __init__(self, coeffs, degree, ntheta=91, nphi=180):
+        from .shape import sh_evaluate
+        self.th = np.linspace(0, np.pi, ntheta)
+        self.ph = np.linspace(0, 2 * np.pi, nphi + 1)
+        T, P = np.meshgrid(self.th, self.ph[:-1], indexing="ij")
+        r = sh_evaluate(coeffs, T, P)
+        self.table = np.concatenate([r, r[:, :1]], axis=1)
+        self.rmax = float(r.max())
+
+    def __call__(self, u):
+        th = np.arccos(np.clip(u[:, 2], -1, 1))
+        ph = np.mod(np.arctan2(u[:, 1], u[:, 0]), 2 * np.pi)
+        fi = th / self.th[1]
+        fj = ph / self.ph[1]
+        return ndimage.map_coordinates(self.table, [fi, fj], order=1, mode="nearest")
+
+
+def random_sh_grains(n, r0, degree=15, roughness=0.12, decay=1.6, seed=0, r0_spread=0.1):
+    """Random star-shaped grain shapes as complex SH coefficients c[n, m + degree].
+
+    r0 : mean grain radius [m]; each grain's radius is drawn with relative spread ``r0_spread``.
+    roughness : relative standard deviation of the surface radius contributed by degree 2;
+    higher degrees fall off as ``n**-decay``. Returns a list of (degree+1, 2*degree+1) arrays.
+    The surface radius is kept above 0.4 r0 (star-shaped, no holes).
+    """
+    from .shape import sh_evaluate
+    rng = np.random.default_rng(seed)
+    out = []
+    T, P = np.meshgrid(np.linspace(0, np.pi, 46), np.linspace(0, 2 * np.pi, 90, endpoint=False), indexing="ij")
+    while len(out) < n:
+        rad = r0 * (1 + r0_spread * rng.standard_normal())
+        c = np.zeros((degree + 1, 2 * degree + 1), dtype=complex)
+        c[0, degree] = rad * np.sqrt(4 * np.pi)
+        for l in range(2, degree + 1):
+            amp = rad * roughness * np.sqrt(4 * np.pi / (2 * l + 1)) * (l / 2.0) ** (-decay)
+            c[l, degree] = amp * rng.standard_normal()
+            for m in range(1, l + 1):
+                v = amp * (rng.standard_normal() + 1j * rng.standard_normal()) / np.sqrt(2)
+                c[l, degree + m] = v
+                c[l, degree - m] = (-1) ** m * np.conj(v)
+        r = sh_evaluate(c, T, P)
+        if r.min() > 0.4 * rad:
+            out.append(c)
+    return out
+
+
+def _random_rotation(rng):
+    q = rng.standard_normal(4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+# -------------------------------------------------------------------------------------- rendering
+
+def _offsets(s):
+    g = (np.arange(s) + 0.5) / s - 0.5
+    return np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+
+
+def render_phase(shape, voxel_size, grains, origin=(0, 0, 0), supersample=5, out=None):
+    """Solid fraction [0, 1] of each voxel for a list of :class:`Grain` (float32 volume [z, y, x]).
+
+    Voxels whose centre lies within ``band`` voxels of a surface (0.9 for spheres, 2 for irregular
+    grains, measured along the radius) are supersampled with ``supersample**3`` points; overlapping
+    grains are combined by taking the larger fraction.
+    """
+    shape = tuple(int(s) for s in shape)
+    vol = np.zeros(shape, np.float32) if out is None else out
+    origin = np.asarray(origin, float)
+    offs = _offsets(supersample)                       # (S, 3) in voxel units, (z, y, x)
+    for g in grains:
+        c = (np.asarray(g.centre, float) - origin)[::-1] / voxel_size     # (z, y, x) voxel coords
+        rv = g.rmax / voxel_size
+        lo = np.maximum(np.floor(c - rv - 2).astype(int), 0)
+        hi = np.minimum(np.ceil(c + rv + 2).astype(int) + 1, shape)
+        if np.any(hi <= lo):
+            continue
+        zz, yy, xx = np.meshgrid(*[np.arange(a, b) for a, b in zip(lo, hi)], indexing="ij")
+        p = np.stack([zz, yy, xx], -1).reshape(-1, 3).astype(float) - c
+        frac = _coverage(p, g, voxel_size, offs)
+        sub = vol[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+        np.maximum(sub, frac.reshape(sub.shape).astype(np.float32), out=sub)
+    return vol
+
+
+def _surface(p, g, voxel_size):
+    """Signed radial distance (voxels) of points p (M,3 zyx, relative to the centre) to the surface,
+    positive inside; and the same for the hollow core (positive inside the void)."""
+    d = np.linalg.norm(p, axis=1)
+    if g.radial is None:
+        rs = np.full(len(p), g.rmax / voxel_size)
+    else:
+        u = p[:, ::-1] / np.maximum(d, 1e-12)[:, None]          # world xyz unit vectors
+        if g.rotation is not None:
+            u = u @ np.asarray(g.rotation)                       # world -> grain frame (R^T u)
+        rs = g.radial(u) / voxel_size
+    s = rs - d
+    core = g.hollow * rs - d if g.hollow > 0 else None
+    return s, core
+
+
+def _coverage(p, g, voxel_size, offs):
+    band = 0.9 if g.radial is None else 2.0
+    s, core = _surface(p, g, voxel_size)
+    frac = (s > 0).astype(float)
+    edge = np.abs(s) < band
+    if core is not None:
+        frac[core > 0] = 0.0
+        edge |= np.abs(core) < band
+    idx = np.nonzero(edge)[0]
+    if len(idx):
+        q = (p[idx, None, :] + offs[None]).reshape(-1, 3)
+        sq, cq = _surface(q, g, voxel_size)
+        inside = sq > 0
+        if cq is not None:
+            inside &= ~(cq > 0)
+        frac[idx] = inside.reshape(len(idx), -1).mean(axis=1)
+    return frac
+
+
+def acquire(phase, psf_sigma=0.8, noise=0.05, drift=0.0, pore=0.2, solid=0.8, seed=0,
+            dtype=np.uint16, offset=0.0):
+    """Grey values from a solid-fraction volume, like a CT reconstruction.
+
+    psf_sigma : standard deviation of the Gaussian point-spread function [voxels].
+    noise : standard deviation of additive Gaussian noise, as a fraction of the solid-pore contrast.
+    drift : relative change of the grey-level contrast from the bottom to the top slice (linear in z).
+    pore, solid : grey levels of pore space and solid as fractions of the dtype's range.
+    offset : additive grey-level offset for the whole scan (scan-to-scan drift), fraction of range.
+    """
+    rng = np.random.default_rng(seed)
+    img = phase.astype(np.float32)
+    if psf_sigma > 0:
+        img = ndimage.gaussian_filter(img, psf_sigma)
+    contrast = solid - pore
+    if drift:
+        nz = img.shape[0]
+        gain = 1.0 + drift * (np.arange(nz, dtype=np.float32) / max(nz - 1, 1) - 0.5)
+        img = img * gain[:, None, None]
+    img = pore + offset + contrast * img
+    if noise > 0:
+        img += rng.standard_normal(img.shape, dtype=np.float32) * np.float32(noise * contrast)
+    if np.issubdtype(np.dtype(dtype), np.integer):
+        top = np.iinfo(dtype).max
+        return np.clip(np.rint(img * top), 0, top).astype(dtype)
+    return img.astype(dtype)
+
+
+def render_scan(shape, voxel_size, centres, radii=None, grains=None, origin=(0, 0, 0), hollow=None,
+                supersample=5, time=float("nan"), controls=None, **acquire_kw) -> Scan:
+    """Render spheres (``centres`` (N,3) [m], ``radii`` (N,) [m]) or a list of :class:`Grain` into a
+    :class:`Scan`. ``hollow`` (N,) gives the void/grain radius ratio per sphere (0 = solid)."""
+    if grains is None:
+        centres = np.asarray(centres, float)
+        radii = np.broadcast_to(np.asarray(radii, float), (len(centres),))
+        hol = np.zeros(len(centres)) if hollow is None else np.broadcast_to(hollow, (len(centres),))
+        ok = np.all(np.isfinite(centres), axis=1)
+        grains = [Grain(c, r, hollow=float(h)) for c, r, h, k in zip(centres, radii, hol, ok) if k]
+    phase = render_phase(shape, voxel_size, grains, origin, supersample)
+    return Scan(acquire(phase, **acquire_kw), voxel_size, origin, time, dict(controls or {}), "<synthetic>")
+
+
+def render_sequence(shape, voxel_size, positions, radii=None, grain_shapes=None, rotations=None,
+                    origin=(0, 0, 0), times=None, controls=None, seed=0, progress=False, **kw) -> list[Scan]:
+    """A scan per frame: ``positions`` (T, N, 3) [m] (NaN rows = absent), spheres of ``radii`` (N,) [m]
+    or irregular grains given by SH coefficient arrays ``grain_shapes`` (N) with per-frame rotation
+    matrices ``rotations`` (T, N, 3, 3). Grain k of every frame is the same grain (known identity).
+    Each scan gets its own noise realisation (seed + frame index)."""
+    positions = np.asarray(positions, float)
+    T = len(positions)
+    radials = None
+    if grain_shapes is not None:
+        radials = [_GridRadial(c, c.shape[0] - 1) for c in grain_shapes]
+    scans = []
+    it = range(T)
+    if progress:
+        from rich.progress import track
+        it = track(it, description="rendering scans")
+    for t in it:
+        if radials is None:
+            sc = render_scan(shape, voxel_size, positions[t], radii, origin=origin, seed=seed + t,
+                             time=float(times[t]) if times is not None else float(t),
+                             controls={k: float(v[t]) for k, v in (controls or {}).items()}, **kw)
+        else:
+            grains = [Grain(positions[t, k], rad.rmax, rad, None if rotations is None else rotations[t, k])
+                      for k, rad in enumerate(radials) if np.all(np.isfinite(positions[t, k]))]
+            sc = render_scan(shape, voxel_size, None, grains=grains, origin=origin, seed=seed + t,
+                             time=float(times[t]) if times is not None else float(t),
+                             controls={k: float(v[t]) for k, v in (controls or {}).items()}, **kw)
+        sc.source = f"<synthetic frame {t}>"
+        scans.append(sc)
+    return scans
+
+
+def scans_from_frames(frames, voxel_size, margin=None, frame_indices=None, progress=True, **kw):
+    """Render frames of a ``frames.h5`` (path or :class:`orchestrator.frames.Frames`) as scans.
+
+    The grid covers all positions of the selected frames plus ``margin`` [m] (default: 2 radii).
+    Returns (scans, ids): ``ids`` are the particle ids of the rows rendered, the ground truth."""
+    from ..frames import Frames
+    fr = frames if isinstance(frames, Frames) else Frames(frames)
+    idx = list(range(fr.n_frames)) if frame_indices is None else list(frame_indices)
+    pos = fr.position[idx]
+    rmax = float(np.nanmax(fr.radius))
+    margin = 2 * rmax if margin is None else margin
+    lo = np.nanmin(pos.reshape(-1, 3), axis=0) - margin
+    hi = np.nanmax(pos.reshape(-1, 3), axis=0) + margin
+    shape = tuple(np.ceil((hi - lo) / voxel_size).astype(int)[::-1] + 1)
+    if np.prod(shape) > 1024 ** 3:
+        raise ValueError(f"{fr.path}: at voxel size {voxel_size:.3g} m the scan would have shape {shape} "
+                         "(over 1024^3 voxels); choose a larger voxel size")
+    controls = {k: v[idx] for k, v in fr.controls.items()}
+    scans = render_sequence(shape, voxel_size, pos, fr.radius, origin=lo, times=fr.time[idx],
+                            controls=controls, progress=progress, **kw)
+    return scans, fr.ids
