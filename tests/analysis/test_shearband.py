@@ -57,5 +57,5 @@ def test_shear_cell_band_position_width_and_steady_state(shear_cell):
     assert len(st) == 4 and (st["n_fits"] == 4).all()      # pairs ending at 1.0, 1.5, 2.0, 2.5 deg
     # the wrong rotation centre (cell axis) scatters the particles' angular velocities in a ring
     res_axis = analyze_shearband(shear_cell, control="angle", bins_z=10, center="axis")
-    top = lambda r: r.tables["profiles"].query("z > @Z_SB + 2 * @W_SB")["v_err"].mean()
+    top = lambda r: r.tables["profiles"].query("z > @Z_SB + 0.5 * @W_SB")["v_err"].mean()
     assert top(res_axis) > 5 * top(res)
