@@ -1,0 +1,62 @@
+import json
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from orchestrator.analysis import ANALYSES, parse_specs, run_analyses
+from orchestrator.analysis import plots
+
+FAST = {"shearband": {"control": "angle", "bins_z": 10}, "profiles": {"bins_z": 10, "bins_r": 5}}
+
+
+@pytest.fixture(scope="module")
+def results(shear_cell):
+    return {name: fn(shear_cell, **FAST.get(name, {})) for name, fn in ANALYSES.items()}
+
+
+def test_every_plot_function_is_used_and_returns_a_figure(results):
+    used = set()
+    for name, res in results.items():
+        fig = res.plot()
+        assert isinstance(fig, Figure), name
+        assert fig.axes and any(ax.has_data() for ax in fig.axes), f"{name}: empty plot"
+        used.add(res.plotter.__name__)
+    assert used == set(plots.__all__)
+
+
+def test_run_analyses_writes_csv_png_and_summary(shear_cell, tmp_path):
+    specs = ["rdf", {"d2min": {"pairs": [[0, 5]]}}, {"rdf": {"edge_correction": False}},
+             {"friction": {"torque_wall": "bottom"}}]      # the bottom wall has no torque: error
+    s = run_analyses(shear_cell, specs, tmp_path)
+    assert list(s) == ["rdf", "d2min", "rdf_2", "friction"]
+    for label in ("rdf", "d2min", "rdf_2"):
+        assert s[label]["status"] == "ok"
+        for f in s[label]["files"]:
+            assert (tmp_path / f).stat().st_size > 0
+        assert f"{label}.png" in s[label]["files"]
+    assert (tmp_path / "d2min_particles.csv").exists()
+    assert s["friction"]["status"] == "error" and "torque" in s["friction"]["error"]
+    on_disk = json.loads((tmp_path / "analysis_summary.json").read_text())
+    assert on_disk["rdf_2"]["scalars"]["edge_correction"] is False
+    assert not list(tmp_path.glob(".*"))               # no temporary files left behind
+
+
+def test_run_analyses_accepts_a_path(shear_cell, tmp_path):
+    s = run_analyses(shear_cell.path, ["coordination"], tmp_path, plots=False)
+    assert s["coordination"]["status"] == "ok"
+    assert not (tmp_path / "coordination.png").exists()
+
+
+def test_bad_specs_are_rejected_before_running():
+    with pytest.raises(ValueError, match="unknown analysis 'd2mni'"):
+        parse_specs(["rdf", "d2mni"])
+    with pytest.raises(ValueError, match="options must be a mapping"):
+        parse_specs([{"rdf": 3}])
+    assert parse_specs([{"rdf": None}]) == [("rdf", {})]
+
+
+def test_main_entry_point(shear_cell, tmp_path, capsys):
+    from orchestrator.analysis.__main__ import main
+    assert main([str(shear_cell.path), str(tmp_path), 'rdf:{"bins": 20}']) == 0
+    assert (tmp_path / "rdf_rdf.csv").exists()
