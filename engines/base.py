@@ -8,6 +8,7 @@ Physics features (the vocabulary scenes use in ``required_features``):
 ========================  ===========================================================
 ``hertz``                  Hertz normal elasticity
 ``restitution_damping``    viscous normal/tangential damping set from e_n (Tsuji form)
+``low_restitution``        e_n below 0.214 (LIGGGHTS' model hertz floor)
 ``seed000_damping``        γ_n = √(4/3 E* m*) with force γ_n √ξ ξ̇ (seed 000 eq. 1)
 ``sliding_friction``       Coulomb sliding with a tangential spring (history)
 ``adhesion``               constant pull-off F_adh · r_eff/⟨r_eff⟩ (seed 000 eq. 1)
@@ -38,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 FEATURES = (
-    "hertz", "restitution_damping", "seed000_damping", "sliding_friction", "adhesion",
+    "hertz", "restitution_damping", "low_restitution", "seed000_damping", "sliding_friction", "adhesion",
     "rolling_friction", "rolling_friction_load", "torsion_friction", "plane_wall",
     "cylinder_wall", "mesh_walls", "rotating_walls", "servo_wall", "membrane", "clumps",
     "particle_stress", "contact_output", "periodic",

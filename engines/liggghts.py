@@ -40,6 +40,11 @@ class Liggghts(Engine):
         "periodic": "boundary p",
     }
     substitutes = {
+        "low_restitution": {
+            "hertz_stiffness_calibrated": "model hertz/stiffness: exact Hertz elasticity, damping force "
+                                          "γ m* √(R* δ) δ̇ with γ set to deliver e_n at the case's largest "
+                                          "impact speed (e_n then varies with speed like v^(1/5))",
+        },
         "adhesion": {
             "edinburgh_per_type_pair": "model edinburgh pullOffForce per type pair; each PSD bin its own "
                                        "type with F_ij = F_adh r_ij/<r_eff> (exact per bin, binned in r)",

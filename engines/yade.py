@@ -26,6 +26,7 @@ class Yade(Engine):
     capabilities = {
         "hertz": "Ip2_FrictMat_FrictMat_MindlinPhys + Law2_ScGeom_MindlinPhys_Mindlin",
         "restitution_damping": "Mindlin en/es (Tsuji damping), tensile force clipped",
+        "low_restitution": "Mindlin en has no lower bound",
         "sliding_friction": "Mindlin shear spring with Coulomb limit",
         "adhesion": "Mindlin includeAdhesion (DMT, F = 4 pi gamma R*, constant per contact)",
         "plane_wall": "utils.wall",
@@ -139,7 +140,8 @@ class Yade(Engine):
         with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
                          controls=controls.keys(), mass=mass, meta=meta) as w:
             for c in chunks:
-                d = np.load(c)
+                with np.load(c) as z:          # NpzFile re-reads a member on every access
+                    d = {k: z[k] for k in z.files}
                 for k in range(len(d["iter"])):
                     it = int(d["iter"][k])
                     if it in seen:

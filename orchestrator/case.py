@@ -123,7 +123,7 @@ class Contact(Strict):
 class TimeStep(Strict):
     """Time step as a ``fraction`` of the critical one (the smaller of the Rayleigh step and a
     fraction of the Hertz contact time), or an explicit ``dt`` checked against it."""
-    fraction: float = Field(0.2, gt=0)
+    fraction: float = Field(0.1, gt=0)
     dt: Time | None = None
     allow_unsafe: bool = False
 

@@ -11,10 +11,13 @@ are SI. Formulas:
   peak force F_max = 4/3 E* √R* δ_max^(3/2);
 - Rayleigh time step dt_R = π R_min √(ρ/G) / (0.1631 ν + 0.8766) (Li, Xu & Thornton 2005);
 - viscous damping from restitution (Tsuji et al. 1992): both engines use
-  c_n = -2 √(5/6) β √(2 E* √(R* δ) m*), β = ln e / √(ln² e + π²) and clip tensile normal forces.
-  With that law the *delivered* restitution differs from the e fed in (by 5 % at e = 0.5), so
-  :func:`restitution_input` integrates the dimensionless contact once and inverts it: the engines
-  receive the e that delivers the requested one.
+  c_n = -2 √(5/6) β √(2 E* √(R* δ) m*), β = ln e / √(ln² e + π²). Without tensile clipping
+  this law delivers exactly the e fed in (Antypov & Elliott 2011, eq. 17): that is YADE's
+  Mindlin, measured here to within the time-discretisation error. LIGGGHTS clips the tensile
+  force (``limitForce on``), which raises the delivered e (0.55 for 0.5 fed in, 0.32 for 0.2), so
+  :func:`restitution_input` integrates the clipped contact once and inverts it;
+- critical time step of a damped contact: the undamped one times √(1+ζ²) − ζ, ζ the damping
+  ratio that gives e_n (Belytschko, Liu & Moran 2000, eq. 6.3.40 for central differences).
 """
 from __future__ import annotations
 
@@ -86,6 +89,11 @@ def sliding_threshold_angle(mu: float, e_n: float) -> float:
 # ----------------------------------------------------------------------------------------------
 # Restitution under Tsuji damping with tensile clipping
 # ----------------------------------------------------------------------------------------------
+def damping_ratio(e: float) -> float:
+    """Damping ratio ζ of a linear oscillator whose restitution is e: -ln e/√(π² + ln² e)."""
+    return -tsuji_beta(e)
+
+
 def tsuji_beta(e: float) -> float:
     """β = ln e / √(ln² e + π²) (LIGGGHTS and YADE Mindlin)."""
     if e >= 1.0:
@@ -144,6 +152,45 @@ def restitution_input(e_target: float) -> float:
     return float(brentq(f, lo, hi, xtol=1e-10))
 
 
+#: LIGGGHTS' ``coefficientRestitution`` must exceed 0.05 (global_properties.cpp), so ``model
+#: hertz`` delivers at least e_n = 0.214; below that the case must accept a substitute.
+LIGGGHTS_MIN_RESTITUTION_INPUT = 0.05
+
+
+@functools.lru_cache(maxsize=256)
+def _sqrt_damping_restitution(b: float) -> float:
+    """e_n of X'' = -5/4 X^1.5 - b √X X' (Hertz with damping ∝ √δ δ̇, clipped; X = δ/δ_max
+    of the elastic impact, τ = t v/δ_max)."""
+    def rhs(t, y):
+        x = max(y[0], 0.0)
+        f = 1.25 * x ** 1.5 + b * math.sqrt(x) * y[1]
+        return [y[1], -max(f, 0.0)]
+
+    def zero_force(t, y):
+        x = max(y[0], 1e-300)
+        return 1.25 * x ** 1.5 + b * math.sqrt(x) * y[1] if y[1] < 0 else 1.0
+    zero_force.terminal = True
+    zero_force.direction = -1
+
+    def left(t, y):
+        return y[0]
+    left.terminal = True
+    left.direction = -1
+    sol = solve_ivp(rhs, (0, 50), [1e-12, 1.0], events=[zero_force, left], rtol=1e-10, atol=1e-13, max_step=0.01)
+    return float(-sol.y[1, -1])
+
+
+def sqrt_damping_gamma(e_target: float, m_eff: float, R_eff: float, E_eff: float, v: float) -> float:
+    """γ [1/(m s)] of LIGGGHTS ``model hertz/stiffness`` (F_damp = γ m* √(R* δ) δ̇) that delivers
+    ``e_target`` for an impact at normal speed ``v`` [m/s]. With this law e_n varies with speed
+    (as the ratio of damping to elastic force grows like v^(1/5)): it is exact only at ``v``."""
+    if e_target >= 1.0:
+        return 0.0
+    b = brentq(lambda b: _sqrt_damping_restitution(round(b, 12)) - e_target, 1e-9, 50.0, xtol=1e-12)
+    d0 = hertz_max_overlap(m_eff, R_eff, E_eff, v)
+    return b * v / (d0 * math.sqrt(R_eff * d0))
+
+
 # ----------------------------------------------------------------------------------------------
 # YADE's Mindlin reduced radius at walls
 # ----------------------------------------------------------------------------------------------
@@ -152,9 +199,10 @@ def restitution_input(e_target: float) -> float:
 #: that LIGGGHTS uses. Measured: a sphere on a utils.wall had a Hertz contact time 2^(1/5) = 1.149
 #: times too long.
 YADE_WALL_RADIUS_RATIO = {"wall": 0.5, "facet": 2.0 / 3.0}
-#: a rigid plane in YADE is a fixed sphere this many times larger than the largest particle
-#: (r_eff = R (1 - 1e-6)); the plane's sag over a particle-size patch is ~1e-6 R.
-YADE_PLANE_SPHERE_FACTOR = 1e6
+#: in the impact scene a rigid plane in YADE is, for each impacting sphere, a fixed sphere this
+#: many times larger centred under that sphere's contact point: r_eff = R (1 - 1e-4), and the
+#: surface sags by (v_t t_c)²/(2 R_b) ~ 1e-8 R over the contact's sliding distance.
+YADE_PLANE_SPHERE_FACTOR = 1e4
 
 
 def yade_wall_young(E: float, nu: float, E_eff_target: float, nu_wall: float, kind: str = "facet") -> float:
@@ -208,38 +256,47 @@ def derive(case) -> dict:
     # Hertz limit: smallest pair (m* = m/2, R* = r/2) and smallest sphere on a wall at v_max
     tc_pp = hertz_contact_time(m_min / 2, r_min / 2, E_pp, v_max) if v_max > 0 else math.inf
     tc_pw = hertz_contact_time(m_min, r_min, E_pw, v_max) if v_max > 0 else math.inf
-    dt_H = min(tc_pp, tc_pw) / HERTZ_STEPS_PER_CONTACT
-    dt_crit = min(dt_R, dt_H)
+    zeta = damping_ratio(e_target)
+    damping_factor = math.sqrt(1 + zeta ** 2) - zeta
+    dt_H = min(tc_pp, tc_pw) / HERTZ_STEPS_PER_CONTACT * damping_factor
+    dt_crit = min(dt_R * damping_factor, dt_H)
     ts = case.timestep
     dt = ts.dt if ts.dt is not None else ts.fraction * dt_crit
     if dt > dt_crit and not ts.allow_unsafe:
         raise DerivationError(
             f"timestep: dt = {dt:.3e} s is above the critical time step {dt_crit:.3e} s "
             f"(Rayleigh {dt_R:.3e} s for r_min = {r_min:.3e} m; Hertz t_c/{HERTZ_STEPS_PER_CONTACT} = "
-            f"{dt_H:.3e} s at v = {v_max:.3g} m/s); use timestep.fraction <= 0.3 or a dt below "
+            f"{dt_H / damping_factor:.3e} s at v = {v_max:.3g} m/s; both times {damping_factor:.3f} for the "
+            f"damping ratio {zeta:.3f} of e_n = {e_target}); use timestep.fraction <= 0.3 or a dt below "
             f"{0.3 * dt_crit:.3e} s, or set timestep.allow_unsafe: true")
     kt_ratio = case.contact.tangential_stiffness_ratio
     params = {
         "material": {"E": E, "nu": nu, "rho": rho, "G": E / (2 * (1 + nu))},
         "wall": {"E": Ew, "nu": nuw},
         "E_eff_pp": E_pp, "E_eff_pw": E_pw, "G_eff_pp": G_pp, "G_eff_pw": G_pw,
-        "restitution": {"target": e_target, "engine_input": e_in, "beta": tsuji_beta(e_in)},
+        # LIGGGHTS clips tensile forces (limitForce on): fed the inverse of the clipped law;
+        # YADE's Mindlin does not clip: the Tsuji law delivers exactly the e it is fed
+        "restitution": {"target": e_target, "engine_input": e_in, "beta": tsuji_beta(e_in),
+                        "yade_input": e_target, "damping_ratio": zeta},
         "friction": case.contact.friction,
         "tangential_stiffness_ratio": kt_ratio,
         "r_min": r_min, "r_max": r_max,
         "dt": dt, "dt_rayleigh": dt_R, "dt_hertz": dt_H, "dt_critical": dt_crit,
-        "dt_fraction": dt / dt_crit, "v_max": v_max,
+        "dt_fraction": dt / dt_crit, "v_max": v_max, "dt_damping_factor": damping_factor,
         "gravity": case.gravity, "gravity_vector": [0.0, 0.0, -case.gravity],
         "features": list(mod.required_features(case)),
     }
+    if e_in <= LIGGGHTS_MIN_RESTITUTION_INPUT and "restitution_damping" in params["features"]:
+        # below what LIGGGHTS' model hertz accepts: YADE does it exactly, LIGGGHTS by substitute
+        params["features"].append("low_restitution")
+        m_ref = rho * 4 / 3 * math.pi * r_max ** 3
+        params["restitution"]["hertz_stiffness"] = {
+            "kn_pp": 4.0 / 3.0 * E_pp, "kn_pw": 4.0 / 3.0 * E_pw, "kt_pp": 8.0 * G_pp, "kt_pw": 8.0 * G_pw,
+            "gamman_pp": sqrt_damping_gamma(e_target, m_ref / 2, r_max / 2, E_pp, v_max),
+            "gamman_pw": sqrt_damping_gamma(e_target, m_ref, r_max, E_pw, v_max),
+            "calibrated_at_speed": v_max,
+        }
     params["scene"] = mod.derive(case, params)
-    lo = params["scene"].get("box_lo")
-    hi = params["scene"].get("box_hi")
-    if lo is not None and hi is not None:
-        Rb = YADE_PLANE_SPHERE_FACTOR * r_max
-        c = [(a + b) / 2 for a, b in zip(lo, hi)]
-        params["yade_plane_radius"] = Rb
-        params["yade_plane_center"] = [c[0], c[1], -Rb]   # touches the plane z = 0 from below
     return params
 
 

@@ -126,40 +126,60 @@ class FrameWriter:
             m.attrs[k] = v if isinstance(v, (str, int, float, np.number)) else json.dumps(v, default=str)
         self.t = 0
 
+    #: frames are buffered in memory and written in blocks of about this many bytes
+    BUFFER_BYTES = 64 * 2 ** 20
+
     def append(self, time: float, step: int = 0, controls: Mapping[str, float] | None = None,
                contacts: Mapping[str, np.ndarray] | None = None, **per_particle) -> int:
         """Append one frame and return its index. ``per_particle`` arrays are (N, ...) in id order."""
-        fr = self.h5["frames"]
         k = self.t
-        fr["time"].resize((k + 1,))
-        fr["time"][k] = time
-        fr["step"].resize((k + 1,))
-        fr["step"][k] = step
         controls = dict(controls or {})
+        row = {"time": float(time), "step": int(step)}
         for c in self.controls:
-            fr[c].resize((k + 1,))
-            fr[c][k] = controls.pop(c, np.nan)
+            row[c] = controls.pop(c, np.nan)
         if controls:
             raise ValueError(f"controls {sorted(controls)} were not declared in FrameWriter(controls=...)")
-        if "position" not in per_particle:
+        if per_particle.get("position") is None:
             raise ValueError("every frame needs a position array")
         for f in self.fields:
-            ds = fr[f]
-            ds.resize((k + 1,) + ds.shape[1:])
-            if f in per_particle and per_particle[f] is not None:
-                a = np.asarray(per_particle.pop(f), dtype=np.float64)
-                if a.shape != ds.shape[1:]:
-                    raise ValueError(f"{f}: expected shape {ds.shape[1:]}, got {a.shape}")
-                ds[k] = a
+            a = per_particle.pop(f, None)
+            shape = (self.n,) + PER_PARTICLE_FIELDS[f]
+            if a is None:
+                a = np.full(shape, np.nan)
             else:
-                per_particle.pop(f, None)
+                a = np.asarray(a, dtype=np.float64)
+                if a.shape != shape:
+                    raise ValueError(f"{f}: expected shape {shape}, got {a.shape}")
+            row[f] = a
         extra = {k2 for k2, v in per_particle.items() if v is not None}
         if extra:
             raise ValueError(f"fields {sorted(extra)} were not declared in FrameWriter(fields=...)")
+        if not hasattr(self, "_buf"):
+            self._buf, self._buf_bytes = [], 0
+        self._buf.append(row)
+        self._buf_bytes += sum(v.nbytes for v in row.values() if isinstance(v, np.ndarray))
         if contacts is not None:
             self.write_contacts(k, contacts)
         self.t += 1
+        if self._buf_bytes >= self.BUFFER_BYTES:
+            self._flush()
         return k
+
+    def _flush(self):
+        buf = getattr(self, "_buf", None)
+        if not buf:
+            return
+        fr = self.h5["frames"]
+        k0 = fr["time"].shape[0]
+        k1 = k0 + len(buf)
+        for name in ("time", "step") + self.controls:
+            fr[name].resize((k1,))
+            fr[name][k0:k1] = [r[name] for r in buf]
+        for f in self.fields:
+            ds = fr[f]
+            ds.resize((k1,) + ds.shape[1:])
+            ds[k0:k1] = np.stack([r[f] for r in buf])
+        self._buf, self._buf_bytes = [], 0
 
     def write_contacts(self, frame_index: int, contacts: Mapping[str, np.ndarray]):
         """Store the contact list of one frame under ``/contacts/<frame_index>``."""
@@ -184,6 +204,7 @@ class FrameWriter:
         """Flush and atomically rename ``<path>.partial`` to ``<path>``."""
         if self.h5 is None:
             return
+        self._flush()
         self.h5.flush()
         self.h5.close()
         self.h5 = None

@@ -43,9 +43,14 @@ class RunOutcome:
         return Frames(self.run_dir / "frames.h5")
 
 
-def run_hash(case: Case, engine_name: str, engine_version: str) -> str:
+def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | None = None) -> str:
+    """Hash of what determines a run: the resolved case, the derived numbers handed to the
+    engine (so a change in orchestrator.derive makes a new run), the engine and its version,
+    and its templates."""
     h = hashlib.sha256()
     h.update(case.hash_input().encode())
+    params = derive(case) if params is None else params
+    h.update(json.dumps({k: v for k, v in params.items() if k != "files"}, sort_keys=True, default=str).encode())
     h.update(engine_name.encode())
     h.update(engine_version.encode())
     h.update(templates_hash(engine_name, case.scene.kind).encode())
@@ -105,7 +110,7 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
         raise EngineError(f"{engine_name} is not installed (no '{eng.executable}' on PATH); "
                           "run the README's set-up command")
     version = eng.version()
-    run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version)}"
+    run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, derive(case))}"
     old = read_summary(run_dir)
     if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
         return RunOutcome(run_dir, "complete", old, reused=True)

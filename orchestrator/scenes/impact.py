@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ..case import Strict
-from ..derive import hertz_contact_time
+from ..derive import YADE_PLANE_SPHERE_FACTOR, hertz_contact_time
 from ..units import Angle, Length, Velocity
 
 CONTROLS: tuple[str, ...] = ()
@@ -74,7 +74,9 @@ def derive(case, common: dict) -> dict:
         m_eff, R_eff, E_eff, v_n = mass / 2, R / 2, common["E_eff_pp"], s.speed
     else:
         n = len(s.angles)
-        y = (np.arange(n) - (n - 1) / 2) * 4 * R
+        # 20 R apart: in YADE each sphere's plane is a large sphere below it (see derive.py), whose
+        # surface must stay far below the neighbours
+        y = (np.arange(n) - (n - 1) / 2) * 20 * R
         # each sphere travels tangentially while approaching: spread along x too
         pos = np.stack([np.zeros(n), y, np.full(n, R + gap)], axis=1)
         vel = np.stack([s.speed * np.sin(s.angles), np.zeros(n), -s.speed * np.cos(s.angles)], axis=1)
@@ -86,6 +88,14 @@ def derive(case, common: dict) -> dict:
     dt = common["dt"]
     steps = int(np.ceil(duration / dt))
     every = max(1, int(tc / dt / s.frames_per_contact))
+    extra = {}
+    if s.target == "plane":
+        # YADE: one fixed sphere of radius R_b per impact, centred below its contact point
+        Rb = YADE_PLANE_SPHERE_FACTOR * R
+        t_hit = gap / (s.speed * np.cos(np.asarray(s.angles)))
+        cx = pos[:, 0] + vel[:, 0] * t_hit
+        extra["yade_plane_spheres"] = [[float(x), float(y_), -Rb] for x, y_ in zip(cx, pos[:, 1])]
+        extra["yade_plane_sphere_radius"] = Rb
     # bounding box for the engines' domain (periodic nowhere)
     lo = pos.min(axis=0) - 3 * R - np.abs(vel).max(axis=0) * duration
     hi = pos.max(axis=0) + 3 * R + np.abs(vel).max(axis=0) * duration
@@ -95,5 +105,5 @@ def derive(case, common: dict) -> dict:
         "n": len(pos), "ids": list(range(1, len(pos) + 1)), "radius": R, "mass": mass,
         "position": pos.tolist(), "velocity": vel.tolist(), "steps": steps, "dump_every": every,
         "duration": duration, "box_lo": lo.tolist(), "box_hi": hi.tolist(),
-        "angles": list(map(float, s.angles)), "target": s.target,
+        "angles": list(map(float, s.angles)), "target": s.target, **extra,
     }
