@@ -25,7 +25,7 @@ class Yade(Engine):
     executable = "yade"
     capabilities = {
         "hertz": "Ip2_FrictMat_FrictMat_MindlinPhys + Law2_ScGeom_MindlinPhys_Mindlin",
-        "restitution_damping": "Mindlin en/es (Tsuji damping), tensile force clipped",
+        "restitution_damping": "Mindlin en/es (Tsuji damping); the tensile damping force is not clipped, so e_n = en exactly",
         "low_restitution": "Mindlin en has no lower bound",
         "sliding_friction": "Mindlin shear spring with Coulomb limit",
         "adhesion": "Mindlin includeAdhesion (DMT, F = 4 pi gamma R*, constant per contact)",

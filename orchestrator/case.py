@@ -286,6 +286,10 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         loc = prefix + tuple(e["loc"])
         # strip discriminator tags pydantic inserts for unions (e.g. 'impact')
         clean = tuple(p for p in loc if not (isinstance(p, str) and p.endswith("]")))
+        if len(clean) > 1 and clean[0] == "scene":
+            from .scenes import scene_kinds
+            if clean[1] in scene_kinds():        # the discriminated union's tag
+                clean = clean[:1] + clean[2:]
         path = ".".join(str(p) for p in clean) or "(top level)"
         typ = e["type"]
         msg = e["msg"]

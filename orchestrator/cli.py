@@ -1,0 +1,218 @@
+"""Command line: ``orchestrator run|validate|engines|verify|analyze|vtk|ct …`` (``--help`` on each)."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _console():
+    from rich.console import Console
+    return Console()
+
+
+def _fmt_s(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    if seconds < 172800:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.1f} days"
+
+
+# ---------------------------------------------------------------------------------------------
+def cmd_validate(args) -> int:
+    from .case import load_case
+    from .derive import derive
+    case = load_case(args.case)
+    p = derive(case)
+    con = _console()
+    con.print(f"[green]{args.case}: valid[/green] — case '{case.name}', scene '{case.scene.kind}', "
+              f"engines {', '.join(case.engines)}")
+    con.print(f"  dt = {p['dt']:.4g} s = {p['dt_fraction']:.3g} × critical {p['dt_critical']:.4g} s "
+              f"(Rayleigh {p['dt_rayleigh']:.4g} s, Hertz t_c/10 {p['dt_hertz']:.4g} s)")
+    con.print(f"  features: {', '.join(p['features'])}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .case import load_case
+    from .runner import run_case
+    case = load_case(args.case)
+    engines = case.engines if args.engine == "all" else [args.engine]
+    con = _console()
+    status = 0
+    for eng in engines:
+        out = run_case(case, eng, runs_root=args.runs, force=args.force, dry_run=args.dry_run,
+                       progress=None if not args.quiet else False)
+        s = out.summary
+        if args.dry_run:
+            con.print(f"[cyan]{eng}[/cyan]: rendered {out.run_dir / s['deck']} — {s['steps']} steps at dt = "
+                      f"{s['dt']:.4g} s; estimated engine time {_fmt_s(s['estimated_engine_time_s'])}")
+        else:
+            wt = s.get("wall_time", {})
+            tag = "reused" if out.reused else s["status"]
+            con.print(f"[green]{eng}[/green]: {tag} {out.run_dir} — engine {wt.get('engine', 0):.1f} s, "
+                      f"total {wt.get('total', 0):.1f} s")
+        for sub in s.get("substitutions", []):
+            con.print(f"  substitution: {sub['feature']} -> {sub['mechanism']}: {sub['note']}")
+    return status
+
+
+def cmd_engines(args) -> int:
+    from rich.table import Table
+    from engines import ENGINE_NAMES, get_engine
+    from engines.base import FEATURES
+    con = _console()
+    t = Table(title="DEM engines")
+    t.add_column("feature")
+    engs = [get_engine(n) for n in ENGINE_NAMES]
+    for e in engs:
+        ver = e.version() if e.available() else "not installed"
+        t.add_column(f"{e.name} ({ver})")
+    for f in FEATURES:
+        row = [f]
+        for e in engs:
+            if f in e.capabilities:
+                row.append("[green]yes[/green]: " + e.capabilities[f])
+            elif f in e.substitutes:
+                row.append("[yellow]substitute[/yellow]: " + "; ".join(e.substitutes[f]))
+            else:
+                row.append("[red]no[/red]")
+        t.add_row(*row)
+    con.print(t)
+    return 0
+
+
+def cmd_verify(args) -> int:
+    from rich.table import Table
+    from .verify import run_verification
+    engines = ["liggghts", "yade"] if args.engine == "all" else [args.engine]
+    tab = run_verification(engines=engines, runs_root=args.runs, force=args.force)
+    con = _console()
+    for eng in engines:
+        sub = tab[tab.engine == eng]
+        t = Table(title=f"Contact-level verification (Chung & Ooi 2011) — {eng}")
+        for c in ("case", "impact", "quantity", "analytic", "engine value", "rel. error", "wall time"):
+            t.add_column(c, justify="right" if c not in ("case", "impact", "quantity") else "left")
+        for _, r in sub.iterrows():
+            err = f"{r.rel_error:+.2e}"
+            err = f"[green]{err}[/green]" if r["pass"] else f"[red]{err}[/red]"
+            t.add_row(r.case.replace("chung_ooi_", ""), r.impact, r.quantity, f"{r.analytic:.5g}",
+                      f"{r.engine_value:.5g}", err, f"{r.wall_time_s:.2f} s")
+        con.print(t)
+    if args.csv:
+        from .atomic import write_text
+        write_text(args.csv, tab.to_csv(index=False))
+    failed = tab[~tab["pass"]]
+    if len(failed):
+        con.print(f"[red]{len(failed)} check(s) outside tolerance[/red]")
+        return 1
+    con.print(f"[green]all {len(tab)} checks within tolerance[/green]")
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    import yaml
+    from .frames import Frames
+    from .analysis import run_analyses
+    run_dir = Path(args.run_dir)
+    specs = args.analysis
+    if not specs:
+        case_file = run_dir / "case.yaml"
+        specs = yaml.safe_load(case_file.read_text()).get("analysis", []) if case_file.exists() else []
+    if not specs:
+        print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
+        return 2
+    out = run_analyses(Frames(run_dir), specs, Path(args.out) if args.out else run_dir / "analysis")
+    print(json.dumps(out, indent=2, default=str))
+    return 0
+
+
+def cmd_vtk(args) -> int:
+    from .frames import Frames
+    fr = Frames(args.run_dir)
+    out = Path(args.out or Path(args.run_dir) / "vtk")
+    out.mkdir(parents=True, exist_ok=True)
+    frames = range(fr.n_frames) if args.frame == "all" else [int(args.frame)]
+    for k in frames:
+        fr.to_vtk(k, out / f"frame_{range(fr.n_frames)[k]:05d}.vtu")
+    print(f"wrote {len(frames)} VTK file(s) to {out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="orchestrator", description=__doc__.split("\n")[0] + "\n\n"
+                                "Runs LIGGGHTS and YADE on granular scenes from YAML cases, writes frames.h5, "
+                                "analyses and compares them.", formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="render, run and parse a case on one or both engines")
+    r.add_argument("case", help="case YAML file")
+    r.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all",
+                   help="engine to run (default: all engines the case lists)")
+    r.add_argument("--force", action="store_true", help="redo a complete run from scratch")
+    r.add_argument("--dry-run", action="store_true", help="render decks and estimate run time only")
+    r.add_argument("--runs", default="runs", help="runs directory (default: ./runs)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=cmd_run)
+
+    v = sub.add_parser("validate", help="validate a case file and show its derived time step")
+    v.add_argument("case")
+    v.set_defaults(func=cmd_validate)
+
+    e = sub.add_parser("engines", help="installed engines, versions and capabilities")
+    e.set_defaults(func=cmd_engines)
+
+    vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")
+    vf.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    vf.add_argument("--runs", default="runs")
+    vf.add_argument("--force", action="store_true")
+    vf.add_argument("--csv", help="also write the table as CSV")
+    vf.set_defaults(func=cmd_verify)
+
+    a = sub.add_parser("analyze", help="run analyses on a run directory or CT frame set")
+    a.add_argument("run_dir")
+    a.add_argument("--analysis", action="append", help="analysis name (repeatable); default: the case's list")
+    a.add_argument("--out", help="output directory (default RUN_DIR/analysis)")
+    a.set_defaults(func=cmd_analyze)
+
+    k = sub.add_parser("vtk", help="export frames as VTK (.vtu) for ParaView")
+    k.add_argument("run_dir")
+    k.add_argument("--frame", default="-1", help="frame index or 'all' (default: last)")
+    k.add_argument("--out", help="output directory (default RUN_DIR/vtk)")
+    k.set_defaults(func=cmd_vtk)
+
+    try:
+        from .ct.cli import add_ct_parser
+        add_ct_parser(sub)
+    except ImportError:
+        pass
+    return p
+
+
+def main(argv=None) -> int:
+    from engines.base import EngineError
+    from .case import CaseError
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except CaseError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except EngineError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: the run can be resumed by running the same command again", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""frames.h5: the layout of DESIGN.md, NaN rows, contacts, walls, atomic writes, tables, VTK."""
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from orchestrator.frames import FrameWriter, Frames, load, write_frames
+
+
+def make(path, T=4, N=5, **kw):
+    rng = np.random.default_rng(0)
+    pos = rng.random((T, N, 3))
+    pos[1, 2] = np.nan                         # particle id 12 absent from frame 1
+    vel = rng.random((T, N, 3))
+    write_frames(path, ids=np.arange(10, 10 + N), radius=np.full(N, 1e-5), time=np.arange(T) * 0.1,
+                 position=pos, velocity=vel, controls={"angle": np.linspace(0, 0.1, T)},
+                 contacts={2: {"i": [10, 11], "j": [11, 12], "point": np.zeros((2, 3)),
+                               "normal": [[1, 0, 0], [0, 1, 0]], "fn": np.ones((2, 3)), "ft": np.zeros((2, 3))}},
+                 walls={"piston": {"time": [0, 1], "force": [[0, 0, 1], [0, 0, 2]]}},
+                 meta={"engine": "test", "case": {"name": "x"}}, **kw)
+    return pos, vel
+
+
+def test_layout_matches_design(tmp_path):
+    make(tmp_path / "frames.h5")
+    with h5py.File(tmp_path / "frames.h5") as h:
+        for name in ("particles/id", "particles/radius", "frames/time", "frames/step", "frames/angle",
+                     "frames/position", "frames/velocity", "contacts/2/i", "contacts/2/fn", "walls/piston/force"):
+            assert name in h, name
+        assert h["frames/position"].shape == (4, 5, 3)
+        assert h["meta"].attrs["engine"] == "test"
+        assert "units" in h["meta"].attrs
+
+
+def test_round_trip_and_nan_rows(tmp_path):
+    pos, vel = make(tmp_path / "frames.h5")
+    fr = load(tmp_path)                           # a run directory works too
+    np.testing.assert_array_equal(fr.position, pos)
+    np.testing.assert_array_equal(fr.velocity, vel)
+    assert fr.ids.tolist() == [10, 11, 12, 13, 14]
+    assert fr.angle[-1] == pytest.approx(0.1)
+    f1 = fr[1]
+    assert not f1.present()[2] and f1.present().sum() == 4
+    df = f1.to_dataframe()
+    assert len(df) == 4 and 12 not in df.id.values
+    assert {"x", "y", "z", "vx", "vy", "vz", "radius"} <= set(df.columns)
+    assert fr.meta["case"] == {"name": "x"}
+
+
+def test_contacts_and_walls_as_tables(tmp_path):
+    make(tmp_path / "frames.h5")
+    fr = Frames(tmp_path / "frames.h5")
+    c = fr.contacts(2)
+    assert c.i.tolist() == [10, 11] and "fn_z" in c.columns
+    with pytest.raises(KeyError, match="no contacts"):
+        fr.contacts(0)
+    assert fr.wall("piston").force_z.tolist() == [1.0, 2.0]
+
+
+def test_writer_is_atomic(tmp_path):
+    path = tmp_path / "frames.h5"
+    with pytest.raises(RuntimeError):
+        with FrameWriter(path, [1, 2], [1.0, 1.0]) as w:
+            w.append(0.0, position=np.zeros((2, 3)))
+            raise RuntimeError("engine died")
+    assert not path.exists() and not (tmp_path / "frames.h5.partial").exists()
+    w = FrameWriter(path, [1, 2], [1.0, 1.0])
+    w.append(0.0, position=np.zeros((2, 3)))
+    assert not path.exists()                      # only a .partial until close
+    w.close()
+    assert Frames(path).n_frames == 1
+
+
+def test_writer_checks_shapes_and_declared_fields(tmp_path):
+    w = FrameWriter(tmp_path / "f.h5", [1, 2], [1.0, 1.0], fields=("position",))
+    with pytest.raises(ValueError, match="expected shape"):
+        w.append(0.0, position=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="not declared"):
+        w.append(0.0, position=np.zeros((2, 3)), velocity=np.zeros((2, 3)))
+    w.abort()
+
+
+def test_buffered_writes_span_blocks(tmp_path, monkeypatch):
+    monkeypatch.setattr(FrameWriter, "BUFFER_BYTES", 1000)    # force many flushes
+    pos = np.random.default_rng(1).random((50, 20, 3))
+    write_frames(tmp_path / "f.h5", np.arange(20), np.ones(20), np.arange(50.0), pos)
+    np.testing.assert_array_equal(Frames(tmp_path / "f.h5").position, pos)
+
+
+def test_vtk_export_readable(tmp_path):
+    import meshio
+    pos, _ = make(tmp_path / "frames.h5")
+    out = Frames(tmp_path / "frames.h5").to_vtk(1, tmp_path / "f1.vtu")
+    m = meshio.read(out)
+    assert m.points.shape == (4, 3)                           # the absent particle is left out
+    np.testing.assert_allclose(m.point_data["radius"], 1e-5)
+    assert set(m.point_data["id"].tolist()) == {10, 11, 13, 14}
