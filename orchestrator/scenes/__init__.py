@@ -21,6 +21,8 @@ import importlib
 #: scene kind -> module name. Add a scene here.
 SCENES = {
     "impact": "orchestrator.scenes.impact",
+    "triaxial": "orchestrator.scenes.triaxial",
+    "shear_cell": "orchestrator.scenes.shear_cell",
 }
 
 
