@@ -157,7 +157,7 @@ class Engine(ABC):
         timed_out = False
         with open(log, "ab") as logf:
             proc = subprocess.Popen(cmd, cwd=run_dir, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                    env=full_env, start_new_session=True)
+                                    env=full_env, start_new_session=True, preexec_fn=_die_with_parent)
             bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress)
             try:
                 import selectors
@@ -203,6 +203,16 @@ class Engine(ABC):
 
     def explain_failure(self, log: Path) -> str:
         return tail(log)
+
+
+def _die_with_parent():
+    """In the child: ask Linux to send SIGTERM when the orchestrator dies (PR_SET_PDEATHSIG), so a
+    killed orchestrator never leaves an engine writing into a run directory."""
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
+    except OSError:  # pragma: no cover - not Linux
+        pass
 
 
 def _kill(proc):

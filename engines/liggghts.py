@@ -48,6 +48,8 @@ class Liggghts(Engine):
         "adhesion": {
             "edinburgh_per_type_pair": "model edinburgh pullOffForce per type pair; each PSD bin its own "
                                        "type with F_ij = F_adh r_ij/<r_eff> (exact per bin, binned in r)",
+            "sjkr_matched_overlap": "cohesion sjkr (F = k A, A ~ 2 pi r_eff xi: proportional to r_eff like the seed, "
+                                    "but growing with the overlap) with k matched so F = F_adh at the expected overlap",
         },
         "seed000_damping": {
             "tsuji_restitution": "Tsuji damping (force ∝ δ^1/4 δ̇) with the restitution that seed 000's "
@@ -58,6 +60,8 @@ class Liggghts(Engine):
         },
         "torsion_friction": {
             "luding_torsion": "rolling_friction luding torsion on (same stiffness and μ as rolling)",
+            "epsd2_torsion_torque": "rolling_friction epsd2 with torsionTorque on: the twist loads the rolling "
+                                    "spring (same stiffness and limit as rolling, no separate mu_tor)",
         },
         "membrane": {
             "servo_ring_walls": "a stack of independently servo-controlled cylindrical ring walls",
@@ -98,7 +102,9 @@ class Liggghts(Engine):
     def command(self, deck: Path, case) -> list[str]:
         # stdbuf: LIGGGHTS' stdout is block-buffered in a pipe and MPI_Abort discards the
         # buffer, which would swallow the ERROR line that explains a failure
-        cmd = ["stdbuf", "-oL", "-eL", self.executable, "-in", deck.name, "-log", "none", "-echo", "none"]
+        # -echo screen: the log shows each deck command before its output, so a failure can be
+        # traced to its deck line (LIGGGHTS 3.8 does not print the failing command itself)
+        cmd = ["stdbuf", "-oL", "-eL", self.executable, "-in", deck.name, "-log", "none", "-echo", "screen"]
         n = case.engine_options.mpi_ranks
         if n > 1:
             cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(n)] + cmd
@@ -110,14 +116,21 @@ class Liggghts(Engine):
 
     def explain_failure(self, log: Path) -> str:
         text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
-        errs = [l for l in text.splitlines() if l.startswith("ERROR")]
+        lines = text.splitlines()
+        err_at = [k for k, l in enumerate(lines) if l.startswith("ERROR")]
         msg = ""
-        if errs:
-            msg = "LIGGGHTS says: " + errs[-1] + "\n"
-            m = re.search(r"Last command: (.*)", text)
-            if m:
-                msg += f"on deck line: {m.group(1)}\n"
-        return msg + tail(log)
+        if err_at:
+            k = err_at[-1]
+            msg = "LIGGGHTS says: " + lines[k] + "\n"
+            deck_path = _deck_beside(log)
+            if deck_path is not None:
+                deck = [d.strip() for d in deck_path.read_text(errors="replace").splitlines()]
+                for echoed in reversed(lines[:k]):          # the last echoed deck command
+                    e = echoed.strip()
+                    if e and e in deck:
+                        msg += f"on {deck_path.name} line {deck.index(e) + 1}: {e}\n"
+                        break
+        return msg + tail(log, 12)
 
     # -- resume -----------------------------------------------------------------------------
     def resume_state(self, run_dir: Path):
@@ -179,6 +192,14 @@ def _scene_hook(case, name, *args) -> dict:
     from orchestrator.scenes import scene_module
     fn = getattr(scene_module(case.scene.kind), name, None)
     return fn(*args) if fn else {}
+
+
+def _deck_beside(log: Path):
+    for name in ("resume.in", "deck.in"):
+        p = Path(log).parent / name
+        if p.exists():
+            return p
+    return None
 
 
 def read_dump(path) -> tuple[int, list[str], np.ndarray]:

@@ -72,14 +72,14 @@ class Yade(Engine):
         o = case.output
         fields = ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
                                                  ("orientation", o.orientation), ("force", o.force),
-                                                 ("torque", o.torque)) if on]
+                                                 ("torque", o.torque), ("stress", o.stress)) if on]
         n = max(1, len(sc.get("ids", [])) or 1)
         ctx = {
             "case": case, "p": params, "resume": resume,
             "files": {k: Path(v).name for k, v in params.get("files", {}).items()},
             "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
             "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
-            "yade_fields": fields,
+            "yade_fields": fields, "yade_contacts": bool(o.contacts),
             # keep a chunk under ~20 MB of doubles
             "chunk_frames": int(max(1, min(256, 20e6 / (8 * 13 * n)))),
         }
@@ -134,23 +134,32 @@ class Yade(Engine):
         extras = _scene_hook(case, "yade_extras", run_dir, params)
         controls = extras.get("controls", {})
         first = np.load(chunks[0])
-        fields = [f for f in ("position", "velocity", "angular_velocity", "orientation", "force", "torque")
-                  if f in first.files]
+        fields = [f for f in ("position", "velocity", "angular_velocity", "orientation", "force", "torque",
+                              "stress") if f in first.files]
+        has_contacts = "c_count" in first.files
         seen = set()
         with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
                          controls=controls.keys(), mass=mass, meta=meta) as w:
             for c in chunks:
                 with np.load(c) as z:          # NpzFile re-reads a member on every access
                     d = {k: z[k] for k in z.files}
+                if has_contacts:
+                    off = np.concatenate([[0], np.cumsum(d["c_count"])]).astype(int)
                 for k in range(len(d["iter"])):
                     it = int(d["iter"][k])
                     if it in seen:
                         continue
                     seen.add(it)
                     kk = w.t
+                    contacts = None
+                    if has_contacts:       # grain-grain contacts of this frame (Recorder.grab_contacts)
+                        sl = slice(off[k], off[k + 1])
+                        contacts = {key: d["c_" + key][sl] for key in ("i", "j", "point", "normal", "fn", "ft")}
+                        for key in ("point", "normal", "fn", "ft"):
+                            contacts[key] = contacts[key].reshape(-1, 3)
                     w.append(float(d["time"][k]), it,
                              controls={n: v[kk] if kk < len(v) else np.nan for n, v in controls.items()},
-                             **{f: d[f][k] for f in fields})
+                             contacts=contacts, **{f: d[f][k] for f in fields})
             for name, series in extras.get("walls", {}).items():
                 series = dict(series)
                 w.write_wall(name, series.pop("time"), **series)

@@ -116,10 +116,39 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
         return RunOutcome(run_dir, "complete", old, reused=True)
     if force and run_dir.exists():
         shutil.rmtree(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with _RunLock(run_dir):
+        return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze)
+
+
+class _RunLock:
+    """An exclusive lock on a run directory (flock), so two processes never drive one run."""
+
+    def __init__(self, run_dir: Path):
+        self.path = run_dir / ".lock"
+
+    def __enter__(self):
+        import fcntl
+        self.fh = open(self.path, "w")
+        try:
+            fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.fh.close()
+            raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+        return self
+
+    def __exit__(self, *exc):
+        import fcntl
+        fcntl.flock(self.fh, fcntl.LOCK_UN)
+        self.fh.close()
+
+
+def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze) -> RunOutcome:
     timings = {}
     t0 = time.perf_counter()
     params, subs = prepare(case, engine_name, run_dir)
-    resume = None if dry_run else eng.resume_state(run_dir)
+    prior = read_summary(run_dir) or {}
+    resume = None if dry_run or prior.get("status") not in ("running", "failed") else eng.resume_state(run_dir)
     if resume and hasattr(eng, "prepare_resume"):
         eng.prepare_resume(run_dir, resume)
     deck = eng.render(case, params, run_dir, resume=resume)

@@ -28,7 +28,7 @@ class Scene(Strict):
     angles: list[Angle] = Field(default_factory=lambda: [0.0])
     initial_gap: float = Field(0.02, gt=0, le=1, description="initial surface gap / radius")
     after_contact: float = Field(1.0, gt=0, description="simulated time after contact ends, in contact times")
-    frames_per_contact: int = Field(400, ge=20, description="frames written per Hertz contact time")
+    frames_per_contact: int = Field(400, ge=1, description="frames written per Hertz contact time")
 
     @field_validator("radius", "speed")
     @classmethod

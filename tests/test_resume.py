@@ -1,0 +1,86 @@
+"""A run killed mid-way (orchestrator and engine) resumes from its last restart/checkpoint and
+ends with the same frames as an uninterrupted run."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.frames import Frames
+
+pytestmark = pytest.mark.engine
+REPO = Path(__file__).resolve().parents[1]
+
+
+def long_case(tmp_path: Path) -> Path:
+    base = REPO / "cases" / "verification" / "chung_ooi_4_oblique.yaml"   # 17 spheres
+    p = tmp_path / "long_impact.yaml"
+    p.write_text(f"extends: {base}\nname: long_impact\n"
+                 "scene: {after_contact: 4000.0, frames_per_contact: 1}\n")
+    return p
+
+
+def orchestrator(*args, **kw):
+    return [sys.executable, "-m", "orchestrator", *args]
+
+
+@pytest.mark.parametrize("engine", ["liggghts", "yade"])
+def test_killed_run_resumes(engine, tmp_path, engines_installed):
+    case = long_case(tmp_path)
+    runs = tmp_path / "runs"
+    proc = subprocess.Popen(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    marker = "restart/state.*.restart" if engine == "liggghts" else "checkpoint.yade.gz"
+    t0 = time.time()
+    run_dir = None
+    while time.time() - t0 < 120:
+        found = list(runs.glob(f"long_impact/{engine}-*/{marker}"))
+        if len(found) >= (2 if engine == "liggghts" else 1):
+            run_dir = found[0].parents[1] if engine == "liggghts" else found[0].parent
+            break
+        assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
+        time.sleep(0.2)
+    assert run_dir is not None, "no restart written within 120 s"
+    os.killpg(proc.pid, signal.SIGKILL)                 # the orchestrator dies...
+    proc.wait()
+    time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "running"
+    assert not (run_dir / "frames.h5").exists()
+
+    done = subprocess.run(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "complete"
+    assert summary["resumed_from"], "the second run started afresh instead of resuming"
+
+    ref_runs = tmp_path / "ref"
+    ref = subprocess.run(orchestrator("run", str(case), "--engine", engine, "--runs", str(ref_runs), "--quiet"),
+                         capture_output=True, text=True, timeout=600)
+    assert ref.returncode == 0, ref.stderr
+    a = Frames(run_dir)
+    b = Frames(next(ref_runs.glob(f"long_impact/{engine}-*")))
+    assert a.n_frames == b.n_frames
+    np.testing.assert_array_equal(a.step, b.step)
+    np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.velocity, b.velocity, rtol=1e-9, atol=1e-12)
+
+
+def test_complete_run_is_reused_and_force_redoes_it(tmp_path, engines_installed):
+    case = REPO / "cases" / "verification" / "chung_ooi_1_sphere_sphere_glass.yaml"
+    runs = tmp_path / "runs"
+    cmd = orchestrator("run", str(case), "--engine", "liggghts", "--runs", str(runs), "--quiet")
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    second = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert second.stdout.startswith("liggghts: reused")
+    third = subprocess.run(cmd + ["--force"], capture_output=True, text=True, timeout=300)
+    assert third.stdout.startswith("liggghts: complete")
