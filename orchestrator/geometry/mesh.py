@@ -124,12 +124,12 @@ def vaned_piston(radius: float, plate_thickness: float, n_seg: int, vane_height:
     x_out = math.sqrt(radius ** 2 - (vane_thickness / 2) ** 2)
     if x_out <= vane_inner_radius:
         raise ValueError("vane_inner_radius must be smaller than the piston radius")
-    m = cylinder_shell(radius, -plate_thickness, 0.0, n_seg)
+    m = cylinder_shell(radius, -plate_thickness, 0.0, n_seg, max_aspect=20.0)
     if flange_radius is not None:
         if flange_radius <= radius:
             raise ValueError("flange_radius must exceed the plate radius")
         ft = flange_thickness if flange_thickness is not None else plate_thickness
-        m = m + cylinder_shell(flange_radius, -plate_thickness - ft, -plate_thickness / 2, n_seg)
+        m = m + cylinder_shell(flange_radius, -plate_thickness - ft, -plate_thickness / 2, n_seg, max_aspect=20.0)
     if vane_height > 0:
         vane = box(vane_inner_radius, x_out, -vane_thickness / 2, vane_thickness / 2, -vane_embed, vane_height)
         for k in range(n_vanes):

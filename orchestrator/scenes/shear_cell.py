@@ -313,7 +313,7 @@ def derive(case, common: dict) -> dict:
         frame_steps[-1] = s3
     if len(set(frame_steps)) != len(frame_steps):
         raise DerivationError("two frames fall on the same step: frame_angles closer than omega*dt")
-    wall_every = max(1, s3 // s.wall_samples)
+    wall_every = max(10, (s3 // s.wall_samples) // 10 * 10)   # a multiple of 10 (YADE averages 10 samples)
     # the deck is a list of events: run up to a step, then write a frame and/or begin a stage
     begins = {s1: "compress", s2: "shear"}
     events = []
@@ -329,6 +329,18 @@ def derive(case, common: dict) -> dict:
     c = case.contact
     contact = {"adhesion_force": F_adh, "expected_overlap": xi, "expected_contact_force": Fc,
                "kn_seed": kn_seed, "kt_seed": kt_seed, "r_eff_mean": r_eff_mean}
+    subs = case.contact.substitutes
+    implemented = {"adhesion": "sjkr_matched_overlap", "torsion_friction": "epsd2_torsion_torque"}
+    if "liggghts" in case.engines:
+        for feat, name in implemented.items():
+            chosen = subs.get(f"liggghts.{feat}", subs.get(feat))
+            if feat in common["features"] and chosen not in (None, name):
+                raise DerivationError(f"contact.substitutes: the shear cell's LIGGGHTS deck implements '{feat}' only "
+                                      f"as '{name}', not '{chosen}'")
+        if "torsion_friction" in common["features"] and not (c.rolling is not None and (c.rolling.model == "seed000"
+                                                                                        or c.rolling.coefficient > 0)):
+            raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (epsd2 torsionTorque) needs rolling "
+                                  "friction too; add contact.rolling")
     if F_adh > 0:
         # YADE: DMT F = 4 pi gamma r_eff, exact for the seed's F_adh r_eff/<r_eff>
         contact["yade_gamma"] = F_adh / (4 * math.pi * r_eff_mean)
