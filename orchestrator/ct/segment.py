@@ -100,8 +100,10 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
     min_volume : smallest grain [m^3] kept (default 30 voxels).
     over_ratio : flag two grains as over-segmented when the distance map on their shared face (the
         saddle) reaches this fraction of the smaller grain's peak: one grain cut in two.
-    under_ratio : flag a grain as under-segmented when its volume exceeds this multiple of the
-        volume of its largest inscribed sphere (spheres: 1; two merged spheres: about 2).
+    under_ratio : flag a grain as under-segmented when the ratio of its volume to that of its
+        largest inscribed sphere exceeds this multiple of the lower-quartile ratio (two merged
+        spheres: about 2); a grain is also flagged when the volume of the convex hull of its voxels
+        per voxel exceeds 1.15 times the lower quartile (the hull bridges two merged grains).
     """
     from skimage.filters import threshold_isodata
     from skimage.segmentation import watershed
@@ -131,6 +133,10 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
         img = scan.volume.astype(np.float32, copy=False)
         sm = ndimage.gaussian_filter(img, sigma) if sigma > 0 else img.astype(np.float32, copy=True)
         t0 = tick("gaussian filter", t0)
+        lo_, hi_ = float(sm.min()), float(sm.max())
+        if threshold is None and hi_ - lo_ <= 1e-6 * max(abs(hi_), 1.0):
+            raise SegmentationError(f"{scan.source}: the volume has a single grey value ({lo_:.4g}); "
+                                    "nothing to segment")
         thr = float(threshold_isodata(sm) if threshold is None else threshold)
         binary = sm > thr
         pore_level = float(sm[~binary].mean()) if (~binary).any() else thr
@@ -204,7 +210,29 @@ def _h_maxima_markers(dist, h):
     return markers, n
 
 
-def _grain_table(seg: Segmentation, dist, over_ratio, under_ratio) -> pd.DataFrame:
+def _hull_ratio(labels, objs) -> np.ndarray:
+    """Volume of the convex hull of each grain's voxel centres divided by its voxel count. Convex
+    grains have nearly the same value (set by discretisation); two grains merged into one label
+    have a larger one (the hull bridges the gap between them)."""
+    from scipy.spatial import ConvexHull, QhullError
+    out = np.full(len(objs), np.nan)
+    for k, sl in enumerate(objs):
+        if sl is None:
+            continue
+        m = labels[sl] == k + 1
+        n = int(m.sum())
+        if n < 20:
+            continue
+        surf = m & ~ndimage.binary_erosion(m)
+        pts = np.argwhere(surf)
+        try:
+            out[k] = ConvexHull(pts).volume / n
+        except QhullError:
+            pass
+    return out
+
+
+def _grain_table(seg: Segmentation, dist, over_ratio, under_ratio, under_hull=1.15) -> pd.DataFrame:
     labels = seg.labels
     scan = seg.scan
     vs = scan.voxel_size
@@ -248,7 +276,13 @@ def _grain_table(seg: Segmentation, dist, over_ratio, under_ratio) -> pd.DataFra
     flag = np.array([""] * n, dtype=object)
     ratio = volume / (4 / 3 * np.pi * t["inscribed_radius"].to_numpy() ** 3)
     t["volume_ratio"] = ratio
-    flag[(ratio > under_ratio) & ~t["at_border"].to_numpy()] = "under"
+    hull = _hull_ratio(labels, bobj)
+    t["hull_ratio"] = hull
+    # reference: the lower quartile, i.e. typical single grains even when many labels are merged
+    ref_h = np.nanpercentile(hull, 25) if np.isfinite(hull).any() else np.nan
+    ref_r = np.percentile(ratio, 25)
+    suspect = (ratio > under_ratio * ref_r) | (hull > under_hull * ref_h)
+    flag[suspect & ~t["at_border"].to_numpy()] = "under"
     c = contacts_from_labels(labels, scan, 1, None, normals=False, dist=dist)
     if len(c):
         pmin = np.minimum(inscribed[c["i"].to_numpy() - 1], inscribed[c["j"].to_numpy() - 1])

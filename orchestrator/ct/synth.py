@@ -32,12 +32,14 @@ __all__ = ["pack_spheres", "render_phase", "acquire", "render_scan", "render_seq
 
 # ------------------------------------------------------------------------------------- packings
 
-def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-3):
+def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-3, initial=None):
     """Place spheres without overlap inside a box or a cylinder (overlap relaxation).
 
     radii : (N,) radii [m].
     box : ((x0, y0, z0), (x1, y1, z1)) [m]; or
     cylinder : (cx, cy, R, z0, z1) [m], axis along z.
+    initial : (N, 3) starting positions [m] (e.g. displaced grains whose overlaps must be removed);
+    default random.
     Returns centres (N, 3) [m]. The largest remaining overlap is below ``tol`` times the mean radius
     (a :class:`RuntimeError` otherwise: the packing is too dense for this simple relaxation).
     """
@@ -46,7 +48,19 @@ def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-
     n = len(r)
     if box is not None:
         lo, hi = np.asarray(box[0], float), np.asarray(box[1], float)
-        x = lo + r[:, None] + rng.random((n, 3)) * (hi - lo - 2 * r[:, None])
+    if initial is not None:
+        pass
+    elif box is not None:
+        # start from a jittered lattice with at least n sites: far fewer overlaps than random
+        # positions, so the relaxation converges in a few dozen sweeps
+        span = hi - lo - 2 * r.mean()
+        cell = (np.prod(span) / n) ** (1 / 3)
+        m = np.maximum(np.floor(span / cell).astype(int), 1)
+        while np.prod(m) < n:
+            m[np.argmax(span / m)] += 1
+        g = np.stack(np.meshgrid(*[(np.arange(k) + 0.5) / k for k in m], indexing="ij"), -1).reshape(-1, 3)
+        g = g[rng.permutation(len(g))[:n]]
+        x = lo + r.mean() + g * span + (rng.random((n, 3)) - 0.5) * 0.2 * span / m
     elif cylinder is not None:
         cx, cy, R, z0, z1 = cylinder
         rho = (R - r) * np.sqrt(rng.random(n))
@@ -55,6 +69,8 @@ def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-
                              z0 + r + rng.random(n) * (z1 - z0 - 2 * r)])
     else:
         raise ValueError("give box or cylinder")
+    if initial is not None:
+        x = np.array(initial, dtype=float)
     rmax = r.max()
     worst = np.inf
     for it in range(iterations):
@@ -69,10 +85,8 @@ def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-
             i, j, d, dist, ov = i[m], j[m], d[m], np.maximum(dist[m], 1e-12 * rmax), ov[m]
             worst = ov.max() if len(ov) else 0.0
             push = (d / dist[:, None]) * (0.5 * 1.02 * ov)[:, None]
-            dx = np.zeros_like(x)
-            np.add.at(dx, i, -push)
-            np.add.at(dx, j, push)
-            x += dx
+            for k in range(3):
+                x[:, k] += np.bincount(j, push[:, k], n) - np.bincount(i, push[:, k], n)
         else:
             worst = 0.0
         # walls
@@ -119,12 +133,12 @@ class Grain:
 class _GridRadial:
     """r(theta, phi) tabulated on a regular grid, bilinear interpolation (periodic in phi)."""
 
+    _basis_cache: dict = {}
+
     def __init__(self, coeffs, degree, ntheta=91, nphi=180):
-        from .shape import sh_evaluate
         self.th = np.linspace(0, np.pi, ntheta)
         self.ph = np.linspace(0, 2 * np.pi, nphi + 1)
-        T, P = np.meshgrid(self.th, self.ph[:-1], indexing="ij")
-        r = sh_evaluate(coeffs, T, P)
+        r = _grid_eval(coeffs, ntheta, nphi, self._basis_cache)
         self.table = np.concatenate([r, r[:, :1]], axis=1)
         self.rmax = float(r.max())
 
@@ -136,6 +150,19 @@ class _GridRadial:
         return ndimage.map_coordinates(self.table, [fi, fj], order=1, mode="nearest")
 
 
+def _grid_eval(c, ntheta, nphi, cache):
+    """r on a (ntheta x nphi) grid (theta incl. poles, phi without 2 pi); the basis is cached."""
+    from .shape import _nm, sh_basis
+    degree = c.shape[0] - 1
+    key = (ntheta, nphi, degree)
+    if key not in cache:
+        T, P = np.meshgrid(np.linspace(0, np.pi, ntheta), np.linspace(0, 2 * np.pi, nphi, endpoint=False),
+                           indexing="ij")
+        cache[key] = sh_basis(T, P, degree)
+    n, m = _nm(degree)
+    return (cache[key] @ c[n, m + degree]).real.reshape(ntheta, nphi)
+
+
 def random_sh_grains(n, r0, degree=15, roughness=0.12, decay=1.6, seed=0, r0_spread=0.1):
     """Random star-shaped grain shapes as complex SH coefficients c[n, m + degree].
 
@@ -144,10 +171,9 @@ def random_sh_grains(n, r0, degree=15, roughness=0.12, decay=1.6, seed=0, r0_spr
     higher degrees fall off as ``n**-decay``. Returns a list of (degree+1, 2*degree+1) arrays.
     The surface radius is kept above 0.4 r0 (star-shaped, no holes).
     """
-    from .shape import sh_evaluate
     rng = np.random.default_rng(seed)
     out = []
-    T, P = np.meshgrid(np.linspace(0, np.pi, 46), np.linspace(0, 2 * np.pi, 90, endpoint=False), indexing="ij")
+    cache: dict = {}
     while len(out) < n:
         rad = r0 * (1 + r0_spread * rng.standard_normal())
         c = np.zeros((degree + 1, 2 * degree + 1), dtype=complex)
@@ -159,7 +185,7 @@ def random_sh_grains(n, r0, degree=15, roughness=0.12, decay=1.6, seed=0, r0_spr
                 v = amp * (rng.standard_normal() + 1j * rng.standard_normal()) / np.sqrt(2)
                 c[l, degree + m] = v
                 c[l, degree - m] = (-1) ** m * np.conj(v)
-        r = sh_evaluate(c, T, P)
+        r = _grid_eval(c, 46, 90, cache)
         if r.min() > 0.4 * rad:
             out.append(c)
     return out
@@ -184,7 +210,7 @@ def _offsets(s):
 def render_phase(shape, voxel_size, grains, origin=(0, 0, 0), supersample=5, out=None):
     """Solid fraction [0, 1] of each voxel for a list of :class:`Grain` (float32 volume [z, y, x]).
 
-    Voxels whose centre lies within ``band`` voxels of a surface (0.9 for spheres, 2 for irregular
+    Voxels whose centre lies within ``band`` voxels of a surface (0.9 for spheres, 1.3 for irregular
     grains, measured along the radius) are supersampled with ``supersample**3`` points; overlapping
     grains are combined by taking the larger fraction.
     """
@@ -224,7 +250,7 @@ def _surface(p, g, voxel_size):
 
 
 def _coverage(p, g, voxel_size, offs):
-    band = 0.9 if g.radial is None else 2.0
+    band = 0.9 if g.radial is None else 1.3
     s, core = _surface(p, g, voxel_size)
     frac = (s > 0).astype(float)
     edge = np.abs(s) < band
