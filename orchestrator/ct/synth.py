@@ -32,7 +32,7 @@ __all__ = ["pack_spheres", "render_phase", "acquire", "render_scan", "render_seq
 
 # ------------------------------------------------------------------------------------- packings
 
-def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=400, tol=1e-3, initial=None):
+def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=3000, tol=1e-3, initial=None):
     """Place spheres without overlap inside a box or a cylinder (overlap relaxation).
 
     radii : (N,) radii [m].
