@@ -204,6 +204,10 @@ class Engine(ABC):
     def explain_failure(self, log: Path) -> str:
         return tail(log)
 
+    def loop_time(self, log: Path) -> float:
+        """Seconds the engine spent integrating (its own report), or NaN when unknown."""
+        return float("nan")
+
 
 def _die_with_parent():
     """In the child: ask Linux to send SIGTERM when the orchestrator dies (PR_SET_PDEATHSIG), so a

@@ -107,6 +107,11 @@ class Yade(Engine):
                 pass
         return msg + tail(log)
 
+    def loop_time(self, log: Path) -> float:
+        """Seconds YADE spent in O.run (the script prints LOOP_TIME)."""
+        text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
+        return sum(float(x) for x in re.findall(r"^LOOP_TIME ([0-9.eE+-]+)", text, flags=re.M))
+
     def resume_state(self, run_dir: Path):
         ck = Path(run_dir) / "checkpoint.yade.gz"
         if not ck.exists():

@@ -183,6 +183,14 @@ class Case(Strict):
     engine_options: EngineOptions = Field(default_factory=EngineOptions)
     analysis: list[str | dict] = Field(default_factory=list)
 
+    @field_validator("analysis")
+    @classmethod
+    def _analysis(cls, v):
+        if v:                                  # imported only when a case asks for analyses
+            from .analysis import parse_specs
+            parse_specs(v)
+        return v
+
     @field_validator("scene", mode="before")
     @classmethod
     def _scene(cls, v):

@@ -15,6 +15,8 @@ particle ``id[k]``.
 
 ``/contacts/<frame index>/``: ``i``, ``j`` (ids), ``point`` (M, 3) [m], ``normal`` (M, 3) unit
 vector from i to j, ``fn`` (M, 3) normal force on i [N], ``ft`` (M, 3) tangential force on i [N].
+A contact with a wall has a negative ``j``: ``-1 - k`` for the k-th wall, whose name is in the
+``/meta`` attribute ``wall_ids`` (JSON ``{"-1": "bottom_piston", ...}``).
 
 ``/walls/<name>/``: ``time`` (S,) [s] and any of ``position`` (S, 3) [m], ``angle`` (S,) [rad],
 ``force`` (S, 3) [N], ``torque`` (S, 3) [N m].

@@ -181,6 +181,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         write_json(run_dir / "summary.json", summary)
         raise
     timings["engine"] = time.perf_counter() - t1
+    # the engine's own integration time: engine - loop = process start-up, reading, writing
+    timings["engine_loop"] = eng.loop_time(run_dir / "engine.log")
     t2 = time.perf_counter()
     meta = {
         "engine": engine_name, "engine_version": version, "case": case.resolved(),
@@ -196,7 +198,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         t3 = time.perf_counter()
         summary["analysis"] = run_case_analyses(case, run_dir)
         timings["analysis"] = time.perf_counter() - t3
-    timings["total"] = sum(v for k, v in timings.items() if k != "total")
+    timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop"))
     summary["wall_time"] = timings
     write_json(run_dir / "summary.json", summary)
     return RunOutcome(run_dir, "complete", summary)
@@ -216,9 +218,18 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
             if resume is None:
                 raise
             write_text(log.with_suffix(".resume-failed.log"), log.read_text(errors="replace") if log.exists() else "")
-            resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand)
+            resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand,
+                                                    step=_restart_step(cand, resume))
+            if resume is not None and hasattr(eng, "prepare_resume"):
+                eng.prepare_resume(run_dir, resume)
             deck = eng.render(case, params, run_dir, resume=resume)
     raise EngineError("unreachable")  # pragma: no cover
+
+
+def _restart_step(cand: str, resume: dict) -> int:
+    """Step of a LIGGGHTS restart file named state.<step>.restart (YADE: the checkpoint's own)."""
+    parts = Path(cand).name.split(".")
+    return int(parts[1]) if len(parts) > 2 and parts[1].isdigit() else resume.get("step", 0)
 
 
 def run_case_analyses(case: Case, run_dir: Path) -> dict:

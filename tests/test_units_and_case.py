@@ -61,6 +61,7 @@ BAD = [
     ("density: 2500 kg/m^3, ", "", "material.density", "required field is missing"),
     ("friction: 0.58", "friction: lots", "contact.friction", "valid number"),
     ("kind: impact", "kind: pendulum", "scene", "scene.kind must be one of"),
+    ("friction: 0.58}", "friction: 0.58}\nanalysis: [d2minn]", "analysis", "unknown analysis 'd2minn'"),
 ]
 
 
