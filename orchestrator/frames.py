@@ -91,7 +91,8 @@ class FrameWriter:
         radius = np.asarray(radius, dtype=np.float64)
         if ids.ndim != 1 or radius.shape != ids.shape:
             raise ValueError(f"ids and radius must be 1-D of equal length, got {ids.shape} and {radius.shape}")
-        if len(np.unique(ids)) != len(ids):
+        srt = np.sort(ids)
+        if len(srt) > 1 and not (srt[1:] != srt[:-1]).all():
             raise ValueError("particle ids must be unique")
         self.n = len(ids)
         self.fields = tuple(fields)
