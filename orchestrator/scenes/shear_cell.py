@@ -362,6 +362,7 @@ def derive(case, common: dict) -> dict:
         e_seed = min(max(e_seed, 0.05), 1.0)
         e_in = restitution_input(e_seed)
         contact["restitution"] = {"target": e_seed, "engine_input": e_in, "beta": tsuji_beta(e_in),
+                                  "yade_input": e_seed,   # YADE does not clip the tensile force (derive.py)
                                   "from": f"seed000 gamma_n at v = {v_char:.3g} m/s"}
     else:
         contact["restitution"] = dict(common["restitution"], **{"from": "contact.restitution"})
@@ -512,7 +513,7 @@ def liggghts_extras(run_dir, params) -> dict:
         a = np.loadtxt(f, comments="#", ndmin=2)
         if a.size:
             rows.append(a)
-    steps = sorted(int(p.name.split(".")[1]) for p in (run_dir / "dump").glob("frame.*.txt"))
+    steps = [int(st) for st in params["scene"]["frame_steps"]]   # the deck writes exactly these
     out = {"controls": _frame_controls(params, steps)}
     if rows:
         a = np.vstack(rows)
