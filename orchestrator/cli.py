@@ -191,6 +191,16 @@ def build_parser() -> argparse.ArgumentParser:
         add_ct_parser(sub)
     except ImportError:
         pass
+    # further command groups register themselves: a module with add_parsers(subparsers)
+    import importlib
+    for name in ("orchestrator.compare.cli", "orchestrator.stability.cli"):
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name and name.startswith(exc.name):
+                continue                      # that command group is not there
+            raise
+        mod.add_parsers(sub)
     return p
 
 
