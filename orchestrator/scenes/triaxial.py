@@ -1,0 +1,675 @@
+"""Drained triaxial compression of a cylindrical sample in a flexible membrane (seed 001 §2.1, §3.2).
+
+Stages, identical in both engines (every number below is computed here, once):
+
+1. **Isotropic compression.** The grains, packed by :func:`pack_cylinder` (collective
+   rearrangement, no overlaps) to ``packing_fraction``, are confined laterally by the membrane
+   (YADE) or its substitute (LIGGGHTS) carrying the confining pressure p (ramped over
+   ``isotropic.ramp_steps``), and axially by a rigid smooth top platen servo-controlled to the same
+   p: v_top = -v_max · clip(g · (1 - σ₁/p), -1, 1). The stage runs in chunks of ``iso_chunk``
+   steps and ends after the first chunk whose *chunk-averaged* σ₁ and σ₃ are both within
+   ``isotropic.tolerance`` of p (or after ``isotropic.max_chunks`` chunks; the test then fails).
+2. **Strain-controlled axial loading.** The top platen moves down at constant speed
+   v = ε̇ H₀ (H₀ = height at the end of stage 1) for ``shear_steps`` steps, which gives exactly
+   the requested axial strain. ε̇ comes from the inertial number stated in the case:
+   I = ε̇ d₅₀ √(ρ/p) (GDR MiDi 2004); I ≤ 1e-3 is the usual quasi-static bound.
+
+Lateral boundary:
+
+- YADE: a membrane of GridNodes/GridConnections/PFacets (yade.gridpfacet) wrapped on the sample;
+  the pressure is applied as nodal forces p·A_f/3 along each facet's current inward normal,
+  recomputed every ``membrane.update_every`` steps (follow-the-surface load, ``O.forces.setPermF``).
+  The membrane's end rings are tied to the platens in z and free radially.
+- LIGGGHTS-PUBLIC has no membrane. Substitute ``shell_pressure`` (named in
+  ``contact.substitutes``): the sample is cut into ``lateral.bands`` horizontal bands between the
+  platens; in each band the outer envelope radius R_k is the largest ρ_i + r_i of its grains, the
+  grains with ρ_i + r_i > R_k - w (w = ``lateral.shell_thickness`` × d₅₀) form the shell, and
+  each shell grain receives the radial inward force p · 2πR_k h_k · r_i²/Σ_shell r_j², recomputed
+  every ``lateral.update_every`` steps. The lateral force on every band therefore equals p times
+  its envelope area; the sample bulges freely.
+
+Measured (time series every ``series_every`` steps, written by the engine into ``triax.txt``):
+σ₁ = (F_top + F_bottom)/2 / A with A = V/H; σ₃ = (radial force the lateral boundary exerts on the
+grains) / (lateral boundary area); ε_a = (H₀ - H)/H₀; ε_v = (V₀ - V)/V₀ (compression positive,
+stage-2 reference). The volume V is measured two independent ways:
+
+- ``boundary``: the volume enclosed by the lateral boundary and the platens. YADE: the membrane's
+  inner surface (closed polyhedron of node centres by the divergence theorem, minus node radius ×
+  area); LIGGGHTS: Σ π R_k² h_k of the band envelopes;
+- ``hull``: the convex hull of the grains' surfaces (points on every sphere near the hull),
+  computed in Python from the frame's positions and radii (:func:`hull_volume`).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from ..case import Strict
+from ..units import Length, Pressure
+
+#: per-frame controls written to frames.h5 (see module docstring)
+CONTROLS: tuple[str, ...] = ("stage", "axial_strain", "volumetric_strain", "volumetric_strain_hull",
+                             "sigma1", "sigma3", "stress_ratio", "volume_boundary", "volume_hull")
+
+#: columns of the engines' time-series file ``triax.txt`` (both engines write the same)
+SERIES_COLUMNS = ("step", "time", "stage", "z_bottom", "z_top", "f_bottom", "f_top", "f_lateral",
+                  "area_lateral", "volume", "pressure")
+
+
+# ---------------------------------------------------------------------------------------------
+# Case section
+# ---------------------------------------------------------------------------------------------
+class PSD(Strict):
+    """Grain-size distribution. Either a truncated log-normal by number with the given arithmetic
+    ``mean`` diameter between ``min`` and ``max`` (log standard deviation ``spread``), or a
+    ``table`` of [diameter, cumulative mass fraction passing] rows (diameters with units)."""
+    min: Length | None = None
+    max: Length | None = None
+    mean: Length | None = None
+    spread: float = Field(0.3, gt=0, le=2)
+    table: list[tuple[Length, float]] | None = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.table is None:
+            if None in (self.min, self.max, self.mean):
+                raise ValueError("give min, max and mean diameters (e.g. '0.3 mm', '1.03 mm', '0.551 mm') or a table")
+            if not 0 < self.min < self.mean < self.max:
+                raise ValueError(f"need 0 < min < mean < max, got {self.min:g}, {self.mean:g}, {self.max:g} m")
+        else:
+            d = [r[0] for r in self.table]
+            f = [r[1] for r in self.table]
+            if len(d) < 2 or any(b <= a for a, b in zip(d, d[1:])) or any(b < a for a, b in zip(f, f[1:])):
+                raise ValueError("table rows must have increasing diameters and non-decreasing fractions")
+            if abs(f[0]) > 1e-9 or abs(f[-1] - 1) > 1e-9:
+                raise ValueError("table fractions must run from 0 to 1")
+        return self
+
+    def bounds(self) -> tuple[float, float]:
+        if self.table is not None:
+            return self.table[0][0], self.table[-1][0]
+        return self.min, self.max
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """n diameters [m]."""
+        if self.table is not None:
+            d = np.array([r[0] for r in self.table])
+            F = np.array([r[1] for r in self.table])
+            # mass fraction -> number fraction within each bin (d^-3 weighting of bin midpoints)
+            dm = np.sqrt(d[1:] * d[:-1])
+            w = np.diff(F) / dm ** 3
+            w = w / w.sum()
+            b = rng.choice(len(w), size=n, p=w)
+            u = rng.random(n)
+            # uniform in log d inside the bin
+            return np.exp(np.log(d[b]) + u * (np.log(d[b + 1]) - np.log(d[b])))
+        mu = _lognormal_mu(self.min, self.max, self.mean, self.spread)
+        out = np.empty(0)
+        while len(out) < n:
+            x = np.exp(rng.normal(mu, self.spread, size=2 * n))
+            out = np.concatenate([out, x[(x >= self.min) & (x <= self.max)]])
+        return out[:n]
+
+    def mean_diameter(self) -> float:
+        """d50 by number (table: by mass) [m], the grain size in the inertial number."""
+        if self.table is not None:
+            d = np.array([r[0] for r in self.table])
+            F = np.array([r[1] for r in self.table])
+            return float(np.interp(0.5, F, d))
+        return self.mean
+
+
+def _truncated_mean(mu, s, lo, hi, m=4000):
+    x = np.linspace(math.log(lo), math.log(hi), m)
+    w = np.exp(-0.5 * ((x - mu) / s) ** 2)
+    return float(np.sum(w * np.exp(x)) / np.sum(w))
+
+
+def _lognormal_mu(lo, hi, mean, s):
+    from scipy.optimize import brentq
+    return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
+
+
+class Isotropic(Strict):
+    """Stage 1: pressure ramp, axial servo, convergence test."""
+    inertial_number: float = Field(1e-3, gt=0, le=0.1,
+                                   description="sets the servo's largest platen speed v_max = I/(d√(ρ/p))·H")
+    gain: float = Field(1.0, gt=0, description="servo gain g in v = -v_max clip(g(1-σ_top/p), -1, 1)")
+    ramp_steps: int | None = Field(None, ge=0, description="steps over which p is ramped up (None: derived)")
+    tolerance: float = Field(0.01, gt=0, lt=0.5, description="|σ/p - 1| to end the stage (chunk averages)")
+    max_chunks: int = Field(60, ge=1)
+    chunk_frames: int = Field(2, ge=1, description="frames per convergence chunk")
+    drag: bool = Field(True, description="Stokes drag F = -6πνr v on the grains during stage 1 only, with ν "
+                                         "such that a grain pushed by p d50² drifts at I·√(p/ρ): "
+                                         "keeps the compaction of the loose packing quasi-static")
+
+
+class Membrane(Strict):
+    """YADE membrane: latex sheet (seed: 0.3 mm thick)."""
+    youngs_modulus: Pressure = "1.4 MPa"
+    thickness: Length = "0.3 mm"
+    density: float = Field(1000.0, gt=0, description="kg/m^3")
+    friction: float = Field(0.0, ge=0, description="grain-membrane friction coefficient")
+    spacing: float = Field(1.5, gt=0.2, description="node spacing / d50")
+    node_radius: float = Field(0.15, gt=0, le=0.5, description="node (= half sheet thickness) radius / d50")
+    contact_stiffness: float = Field(1.0, gt=0, description="grain-membrane kn as a multiple of the Hertz "
+                                                              "tangent stiffness of a d50 grain on a flat wall at p")
+    update_every: int = Field(50, ge=1, description="steps between pressure-direction updates")
+
+
+class Lateral(Strict):
+    """LIGGGHTS substitute (shell_pressure): bands and shell definition."""
+    bands: int | None = Field(None, ge=1, description="None: one band per ~3 d50 of height")
+    shell_thickness: float = Field(0.5, gt=0, le=2, description="w / d50")
+    update_every: int = Field(20, ge=1)
+
+
+class Clumps(Strict):
+    """Rigid clumps from a shape library: each shape is a list of [x, y, z, r] spheres in units of
+    its equivalent-volume diameter; every sampled grain gets shape ``k mod len(shapes)`` (or a
+    random shape with ``random: true``), scaled to its sampled diameter and randomly rotated."""
+    shapes: list[list[tuple[float, float, float, float]]]
+    random: bool = True
+
+    @field_validator("shapes")
+    @classmethod
+    def _shapes(cls, v):
+        if not v or any(len(s) < 1 for s in v):
+            raise ValueError("give at least one shape with at least one sphere")
+        for s in v:
+            if any(r[3] <= 0 for r in s):
+                raise ValueError("sphere radii must be positive")
+        return v
+
+
+class Scene(Strict):
+    kind: Literal["triaxial"]
+    diameter: Length = "12 mm"
+    height: Length = "25 mm"
+    grains: int | None = Field(None, ge=20, description="scale the sample (same height/diameter) to hold about "
+                                                         "this many grains; None: as many as fit")
+    psd: PSD
+    packing_fraction: float = Field(0.52, gt=0.3, lt=0.56, description="solid fraction of the generated packing")
+    confining_pressure: Pressure = "300 kPa"
+    axial_strain: float = Field(0.2, gt=0, lt=0.5, description="axial strain at the end of loading")
+    inertial_number: float = Field(1e-3, gt=0, le=0.1, description="I = ε̇ d50 √(ρ/p) during axial loading")
+    platen_friction: float = Field(0.0, ge=0, description="grain-platen friction (smooth platens: 0)")
+    isotropic: Isotropic = Field(default_factory=Isotropic)
+    membrane: Membrane = Field(default_factory=Membrane)
+    lateral: Lateral = Field(default_factory=Lateral)
+    clumps: Clumps | None = None
+    frames: int = Field(20, ge=2, description="frames written during axial loading")
+    series_every: int | None = Field(None, ge=1, description="steps between time-series rows (None: derived)")
+
+    @field_validator("diameter", "height", "confining_pressure")
+    @classmethod
+    def _pos(cls, v, info):
+        if v <= 0:
+            raise ValueError(f"{info.field_name} must be positive, got {v:g} (SI)")
+        return v
+
+
+# ---------------------------------------------------------------------------------------------
+# Scene contract
+# ---------------------------------------------------------------------------------------------
+def required_features(case) -> list[str]:
+    feats = ["hertz", "restitution_damping", "sliding_friction", "membrane"]
+    if case.scene.clumps is not None:
+        feats.append("clumps")
+    if case.output.stress:
+        feats.append("particle_stress")
+    if case.output.contacts:
+        feats.append("contact_output")
+    return feats
+
+
+def size_range(case) -> tuple[float, float]:
+    lo, hi = case.scene.psd.bounds()
+    return lo / 2, hi / 2
+
+
+def strain_rate(case) -> float:
+    """ε̇ [1/s] from the inertial number: I = ε̇ d50 √(ρ/p)."""
+    s = case.scene
+    return s.inertial_number / (s.psd.mean_diameter() * math.sqrt(case.material.density / s.confining_pressure))
+
+
+def max_velocity(case) -> float:
+    """Largest expected relative contact speed [m/s]: the faster of the loading platen and the
+    isotropic servo's v_max, times 4 for local rearrangements."""
+    s = case.scene
+    d = s.psd.mean_diameter()
+    rate_iso = s.isotropic.inertial_number / (d * math.sqrt(case.material.density / s.confining_pressure))
+    H = _sample_size(case)[1]
+    return 2.0 * max(strain_rate(case), rate_iso) * H
+
+
+_SIZE_CACHE: dict = {}
+
+
+def _sample_size(case) -> tuple[float, float, int, np.ndarray]:
+    """(diameter, height, n, diameters): the sample and its grains' sampled diameters."""
+    key = (case.scene.model_dump_json(), case.seed)
+    if key not in _SIZE_CACHE:
+        _SIZE_CACHE.clear()
+        _SIZE_CACHE[key] = _sample_size_uncached(case)
+    return _SIZE_CACHE[key]
+
+
+def _sample_size_uncached(case):
+    s = case.scene
+    rng = np.random.default_rng(case.seed)
+    probe = s.psd.sample(20000, np.random.default_rng(case.seed + 1))
+    v_grain = float(np.mean(np.pi / 6 * probe ** 3))
+    D, H = s.diameter, s.height
+    v_sample = np.pi / 4 * D ** 2 * H
+    n_fit = v_sample * s.packing_fraction / v_grain
+    if s.grains is not None:
+        scale = (s.grains / n_fit) ** (1 / 3)
+        D, H, n = D * scale, H * scale, s.grains
+    else:
+        n = int(round(n_fit))
+    d = s.psd.sample(n, rng)
+    # rescale the sample so that the *sampled* grains fill it at packing_fraction exactly
+    vs = float(np.sum(np.pi / 6 * d ** 3))
+    k = (vs / s.packing_fraction / (np.pi / 4 * D ** 2 * H)) ** (1 / 3)
+    return D * k, H * k, n, d
+
+
+def derive(case, common: dict) -> dict:
+    s = case.scene
+    D, H, n, d = _sample_size(case)
+    rho = case.material.density
+    p = s.confining_pressure
+    dt = common["dt"]
+    d50 = s.psd.mean_diameter()
+    rate = strain_rate(case)
+    # --- frames and chunks --------------------------------------------------------------------
+    shear_total = s.axial_strain / rate / dt           # steps at the nominal rate
+    dump_every = max(1, int(round(shear_total / s.frames)))
+    series_every = s.series_every or max(1, min(dump_every // 10, 200))
+    dump_every = max(1, int(round(dump_every / series_every))) * series_every
+    shear_steps = dump_every * s.frames
+    rate = s.axial_strain / (shear_steps * dt)           # exact: shear_steps give the requested strain
+    iso_chunk = dump_every * s.isotropic.chunk_frames
+    # time for a pressure wave to cross the sample ~ H / sqrt(E*/rho)... the slow part is the
+    # rearrangement; ramp the pressure over ~10 servo time scales t = H / v_max
+    rate_iso = s.isotropic.inertial_number / (d50 * math.sqrt(rho / p))
+    v_iso = rate_iso * H
+    ramp = s.isotropic.ramp_steps if s.isotropic.ramp_steps is not None else \
+        int(min(iso_chunk * s.isotropic.max_chunks / 3, 0.02 / rate_iso / dt))
+    # --- lateral boundary numbers -------------------------------------------------------------
+    bands = s.lateral.bands or max(1, int(round(H / (3 * d50))))
+    m = s.membrane
+    E_pw = common["E_eff_pw"]
+    # Hertz tangent stiffness of a d50 grain on a flat wall carrying F = p d50^2
+    F = p * d50 ** 2
+    R = d50 / 2
+    delta = (3 * F / (4 * E_pw * math.sqrt(R))) ** (2 / 3)
+    k_hertz = 2 * E_pw * math.sqrt(R * delta)
+    k_contact = m.contact_stiffness * k_hertz
+    r_node = m.node_radius * d50
+    # Ip2_FrictMat_CpmMat_FrictPhys: kn = 2 E1 r1 E2 r2/(E1 r1 + E2 r2) with the grain (E, r) and
+    # the facet (E_f, r_node); solve for E_f at r1 = R
+    E1R1 = case.material.youngs_modulus * R
+    if k_contact >= 2 * E1R1:
+        k_contact = 1.9 * E1R1
+    e2r2 = k_contact * E1R1 / (2 * E1R1 - k_contact)
+    E_facet = e2r2 / r_node
+    # connections: CohFrictPhys kn = E_c r_node; a square-with-diagonal sheet of springs k at
+    # spacing L has a 2-D modulus ~ k: E_c = E_m t / r_node
+    E_conn = m.youngs_modulus * m.thickness / r_node
+    spacing = m.spacing * d50
+    n_theta = max(12, int(round(math.pi * D / spacing)))
+    n_z = max(4, int(round(H / spacing)))
+    # node mass: the sheet's own mass, raised if needed so that a node on a grain contact is
+    # stable at dt (m >= k (dt/0.2)^2)
+    a_node = math.pi * D * H / (n_theta * n_z)
+    m_node = max(m.density * m.thickness * a_node, 2.0 * k_contact * (dt / 0.2) ** 2)
+    total_iso = iso_chunk * s.isotropic.max_chunks
+    # stage-1 drag (same law in both engines): terminal speed v_t = I_iso sqrt(p/rho) for F = p d50^2
+    v_t = s.isotropic.inertial_number * math.sqrt(p / rho)
+    nu = p * d50 / (3 * math.pi * v_t) if s.isotropic.drag else 0.0
+    if nu > 0:
+        r_min = common["r_min"]
+        tau = 2 * rho * r_min ** 2 / (9 * nu)          # m/b of the smallest grain
+        if dt > tau:
+            from ..derive import DerivationError
+            raise DerivationError(f"scene.isotropic.drag: the drag time m/b = {tau:.3g} s of the smallest grain is "
+                                  f"below dt = {dt:.3g} s (explicit drag unstable); raise "
+                                  "scene.isotropic.inertial_number or set drag: false")
+    params = {
+        "n": n, "ids": list(range(1, n + 1)), "diameters": d.tolist(),
+        "diameter": D, "height": H, "d50": d50, "pressure": p, "axial_strain": s.axial_strain,
+        "strain_rate": rate, "inertial_number": s.inertial_number, "shear_steps": shear_steps,
+        "iso": {"chunk": iso_chunk, "max_chunks": s.isotropic.max_chunks, "tolerance": s.isotropic.tolerance,
+                "v_max": v_iso, "gain": s.isotropic.gain, "ramp_steps": max(1, ramp),
+                "strain_rate_max": rate_iso, "drag_viscosity": nu,
+                "drag_coefficient": 6 * math.pi * nu},
+        "dump_every": dump_every, "series_every": series_every,
+        "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
+        "restart_every": 10 ** 12,        # no restart files: a triaxial run restarts from scratch
+        "platen_friction": s.platen_friction,
+        "membrane": {"n_theta": n_theta, "n_z": n_z, "node_radius": r_node, "E_conn": E_conn,
+                     "E_facet": E_facet, "k_contact": k_contact, "node_mass": m_node,
+                     "friction": m.friction, "update_every": m.update_every, "density": m.density},
+        "lateral": {"bands": bands, "shell": s.lateral.shell_thickness * d50,
+                    "update_every": s.lateral.update_every},
+        "skin": 0.3 * d50,
+        "series_columns": list(SERIES_COLUMNS),
+        # servo update period: the platen moves at most ~ one tenth of a d50 grain's contact
+        # overlap at p per update
+        "servo_every": int(max(1, min(series_every, 0.1 * delta / (v_iso * dt)))),
+    }
+    return params
+
+
+def prepare(case, params: dict, run_dir: Path) -> dict:
+    """Pack the grains (cached in run_dir), write particles.txt and the platen meshes; complete
+    params['scene'] with the packed geometry."""
+    from ..atomic import write_json
+    from ..particles_io import write_particle_table
+    sc = params["scene"]
+    run_dir = Path(run_dir)
+    geo_path = run_dir / "packing.json"
+    if geo_path.exists() and (run_dir / "particles.txt").exists():
+        geo = json.loads(geo_path.read_text())
+    else:
+        r = np.asarray(sc["diameters"]) / 2
+        pos, geo = pack_cylinder(r, sc["diameter"] / 2, sc["height"], np.random.default_rng(case.seed + 2))
+        write_particle_table(run_dir / "particles.txt", sc["ids"], r, case.material.density, pos)
+        write_json(geo_path, geo)
+    sc.update(geo)
+    sc.pop("diameters", None)
+    R0 = geo["radius0"]
+    # YADE platens: fixed spheres this large (sag over the sample radius R0: R0 * 5e-7)
+    sc["yade_platen_radius"] = 1e6 * R0
+    half = 3.0 * R0
+    sc["box_lo"] = [-half, -half, geo["z_bottom0"] - 2 * R0]
+    sc["box_hi"] = [half, half, geo["z_top0"] + 2 * R0]
+    files = {}
+    for name, z in (("bottom", geo["z_bottom0"]), ("top", geo["z_top0"])):
+        f = run_dir / f"platen_{name}.stl"
+        _write_square_stl(f, 1.6 * R0 * 1.5, z, up=(name == "bottom"))
+        files[f"platen_{name}"] = str(f)
+    return files
+
+
+def _write_square_stl(path: Path, half: float, z: float, up: bool):
+    """A square plate of half-width ``half`` at height z, two triangles, normal +z if ``up``."""
+    from ..atomic import write_text
+    a, b, c, dd = (-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)
+    tris = [(a, b, c), (a, c, dd)] if up else [(a, c, b), (a, dd, c)]
+    nz = 1.0 if up else -1.0
+    out = ["solid platen"]
+    for t in tris:
+        out.append(f"facet normal 0 0 {nz}\n outer loop")
+        out += [f"  vertex {v[0]!r} {v[1]!r} {v[2]!r}" for v in t]
+        out.append(" endloop\nendfacet")
+    out.append("endsolid platen")
+    write_text(path, "\n".join(out) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------
+# Packing
+# ---------------------------------------------------------------------------------------------
+def pack_cylinder(r: np.ndarray, R: float, H: float, rng: np.random.Generator, tol: float = 1e-3,
+                  max_iter: int = 4000) -> tuple[np.ndarray, dict]:
+    """Overlap-free random packing of spheres with radii ``r`` [m] in the cylinder ρ ≤ R,
+    0 ≤ z ≤ H, by collective rearrangement: random centres, then repeated pairwise push-apart
+    of overlapping spheres (each moved in inverse proportion to its volume) and projection into
+    the cylinder, until the largest overlap is below ``tol`` × r_min; the remaining overlaps are
+    removed by a uniform expansion about the centre. Returns (positions, geometry)."""
+    from scipy.spatial import cKDTree
+    n = len(r)
+    u = rng.random(n)
+    th = rng.random(n) * 2 * np.pi
+    rho = np.sqrt(u) * np.maximum(R - r, 0)
+    pos = np.column_stack([rho * np.cos(th), rho * np.sin(th), r + rng.random(n) * np.maximum(H - 2 * r, 0)])
+    vol = r ** 3
+    rmax = r.max()
+    rmin = r.min()
+    for it in range(max_iter):
+        tree = cKDTree(pos)
+        pairs = tree.query_pairs(2 * rmax, output_type="ndarray")
+        i, j = pairs[:, 0], pairs[:, 1]
+        dv = pos[j] - pos[i]
+        dist = np.linalg.norm(dv, axis=1)
+        ov = r[i] + r[j] - dist
+        m = ov > 0
+        worst = ov[m].max() / rmin if m.any() else 0.0
+        if worst < tol:
+            break
+        i, j, dv, dist, ov = i[m], j[m], dv[m], dist[m], ov[m]
+        nvec = dv / np.maximum(dist, 1e-300)[:, None]
+        wi = vol[j] / (vol[i] + vol[j])
+        step = 0.55 * ov                          # slight over-relaxation
+        disp = np.zeros_like(pos)
+        np.add.at(disp, i, -(step * wi)[:, None] * nvec)
+        np.add.at(disp, j, (step * (1 - wi))[:, None] * nvec)
+        pos += disp
+        # project into the cylinder
+        rr = np.hypot(pos[:, 0], pos[:, 1])
+        lim = R - r
+        out = rr > lim
+        pos[out, :2] *= (lim[out] / rr[out])[:, None]
+        pos[:, 2] = np.clip(pos[:, 2], r, H - r)
+    else:
+        raise RuntimeError(f"packing {n} grains at the requested packing fraction did not converge "
+                           f"(largest overlap {worst:.3g} r_min after {max_iter} iterations); lower packing_fraction")
+    # remove the remaining overlaps exactly: expand about the centre
+    tree = cKDTree(pos)
+    pairs = tree.query_pairs(2 * rmax, output_type="ndarray")
+    c = np.array([0.0, 0.0, H / 2])
+    if len(pairs):
+        i, j = pairs[:, 0], pairs[:, 1]
+        dist = np.linalg.norm(pos[j] - pos[i], axis=1)
+        need = np.max((r[i] + r[j]) / dist)
+        if need > 1:
+            pos = c + (pos - c) * need * (1 + 1e-9)
+    rr = np.hypot(pos[:, 0], pos[:, 1])
+    geo = {
+        "radius0": float(np.max(rr + r)),
+        "z_bottom0": float(np.min(pos[:, 2] - r)),
+        "z_top0": float(np.max(pos[:, 2] + r)),
+        "packing_iterations": it,
+    }
+    geo["height0"] = geo["z_top0"] - geo["z_bottom0"]
+    geo["packing_fraction0"] = float(np.sum(4 / 3 * np.pi * r ** 3) / (np.pi * geo["radius0"] ** 2 * geo["height0"]))
+    return pos, geo
+
+
+# ---------------------------------------------------------------------------------------------
+# Volumes
+# ---------------------------------------------------------------------------------------------
+_SPHERE_DIRS: np.ndarray | None = None
+
+
+def _sphere_dirs(k: int = 96) -> np.ndarray:
+    """k nearly uniform unit vectors (Fibonacci sphere)."""
+    global _SPHERE_DIRS
+    if _SPHERE_DIRS is None or len(_SPHERE_DIRS) != k:
+        i = np.arange(k) + 0.5
+        phi = np.arccos(1 - 2 * i / k)
+        th = np.pi * (1 + 5 ** 0.5) * i
+        _SPHERE_DIRS = np.column_stack([np.cos(th) * np.sin(phi), np.sin(th) * np.sin(phi), np.cos(phi)])
+    return _SPHERE_DIRS
+
+
+def hull_volume(pos: np.ndarray, r: np.ndarray, z_bottom: float | None = None, z_top: float | None = None) -> float:
+    """Volume [m³] of the convex hull of the grains' surfaces, clipped to the platens
+    z_bottom ≤ z ≤ z_top when given. Surfaces are sampled with 96 points per sphere for the
+    spheres whose centre lies within 2 r_max of the centres' hull (the others cannot touch it)."""
+    from scipy.spatial import ConvexHull
+    ok = ~np.isnan(pos).any(axis=1)
+    pos, r = pos[ok], r[ok]
+    h0 = ConvexHull(pos)
+    eq = h0.equations                                   # n·x + d <= 0 inside
+    depth = -(pos @ eq[:, :3].T + eq[:, 3]).min(axis=1)  # distance to the nearest hull plane
+    near = depth < 2 * r.max()
+    pts = (pos[near, None, :] + r[near, None, None] * _sphere_dirs()[None]).reshape(-1, 3)
+    if z_bottom is not None:
+        pts[:, 2] = np.clip(pts[:, 2], z_bottom, z_top)
+    return float(ConvexHull(np.vstack([pts, pos])).volume)
+
+
+# ---------------------------------------------------------------------------------------------
+# Post-processing hooks (engine adapters call these before writing frames.h5)
+# ---------------------------------------------------------------------------------------------
+def read_series(run_dir: Path) -> dict:
+    a = np.loadtxt(Path(run_dir) / "triax.txt", ndmin=2, comments="#")
+    if a.shape[1] != len(SERIES_COLUMNS):
+        raise ValueError(f"{run_dir}/triax.txt: {a.shape[1]} columns, expected {len(SERIES_COLUMNS)}")
+    # a time series may repeat a step at a stage boundary: keep the last row of each step
+    _, idx = np.unique(a[::-1, 0], return_index=True)
+    a = a[::-1][idx]
+    return {c: a[:, k] for k, c in enumerate(SERIES_COLUMNS)}
+
+
+def analyse(series: dict, p: float) -> dict:
+    """Derived time series (σ1, σ3, ε_a, ε_v from the boundary volume) and the stage-1 end."""
+    s = series
+    H = s["z_top"] - s["z_bottom"]
+    A = s["volume"] / H
+    sigma1 = 0.5 * (s["f_top"] + s["f_bottom"]) / A
+    sigma3 = s["f_lateral"] / s["area_lateral"]
+    shear = s["stage"] >= 2
+    if shear.any():
+        k0 = int(np.argmax(shear))
+        H0, V0 = H[k0], s["volume"][k0]
+    else:
+        k0, H0, V0 = len(H) - 1, H[-1], s["volume"][-1]
+    return {"H": H, "A": A, "sigma1": sigma1, "sigma3": sigma3, "axial_strain": (H0 - H) / H0,
+            "volumetric_strain": (V0 - s["volume"]) / V0, "k0": k0, "H0": H0, "V0": V0, "shear": shear}
+
+
+def _window_mean(steps, values, at, half):
+    m = np.abs(steps - at) <= half
+    return float(np.mean(values[m])) if m.any() else float(np.interp(at, steps, values))
+
+
+def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positions) -> dict:
+    """Controls per frame, wall/time series and the scene summary (``triaxial.json``)."""
+    from ..atomic import write_json
+    from ..particles_io import read_particle_table
+    sc = params["scene"]
+    p = sc["pressure"]
+    s = read_series(run_dir)
+    a = analyse(s, p)
+    r = read_particle_table(Path(run_dir) / "particles.txt")["radius"]
+    st = s["step"]
+    half = sc["dump_every"] / 2
+    ctl = {k: [] for k in CONTROLS}
+    for k, step in enumerate(frame_steps):
+        pos = positions(k)
+        j = int(np.argmin(np.abs(st - step)))
+        zb, zt = float(s["z_bottom"][j]), float(s["z_top"][j])
+        vh = hull_volume(pos, r, zb, zt)
+        ctl["stage"].append(float(s["stage"][j]))
+        ctl["axial_strain"].append(float(a["axial_strain"][j]))
+        ctl["volume_boundary"].append(float(s["volume"][j]))
+        ctl["volume_hull"].append(vh)
+        ctl["volumetric_strain"].append(float(a["volumetric_strain"][j]))
+        s1 = _window_mean(st, a["sigma1"], step, half)
+        s3 = _window_mean(st, a["sigma3"], step, half)
+        ctl["sigma1"].append(s1)
+        ctl["sigma3"].append(s3)
+        ctl["stress_ratio"].append(s1 / s3 if s3 else np.nan)
+    # hull-based volumetric strain, referenced to the first shear frame (stage-2 start)
+    vh = np.asarray(ctl["volume_hull"])
+    stage = np.asarray(ctl["stage"])
+    k0 = int(np.argmax(stage >= 2)) if (stage >= 2).any() else len(vh) - 1
+    ctl["volumetric_strain_hull"] = ((vh[k0] - vh) / vh[k0]).tolist()
+    controls = {k: np.asarray(v, dtype=float) for k, v in ctl.items()}
+    # summary numbers
+    shear = a["shear"]
+    iso_end = np.arange(len(st)) < a["k0"]
+    chunk = sc["iso"]["chunk"]
+    last_iso = iso_end & (st > st[a["k0"]] - chunk) if a["k0"] > 0 else iso_end
+    summ = {"pressure_target": p}
+    if last_iso.any():
+        s1i, s3i = float(np.mean(a["sigma1"][last_iso])), float(np.mean(a["sigma3"][last_iso]))
+        summ["isotropic_end"] = {"sigma1": s1i, "sigma3": s3i, "stress_ratio": s1i / s3i,
+                                 "sigma3_error": s3i / p - 1, "sigma1_error": s1i / p - 1,
+                                 "applied_pressure": float(np.mean(s["pressure"][last_iso])),
+                                 "steps": int(st[a["k0"]])}
+    if shear.any():
+        # lateral stress stray during shear, on averages over one series window of 10 rows
+        e3 = a["sigma3"][shear] / p - 1
+        w = max(1, min(10, len(e3) // 10))
+        e3s = np.convolve(e3, np.ones(w) / w, mode="valid")
+        summ["shear"] = {
+            "final_axial_strain": float(a["axial_strain"][-1]),
+            "sigma3_error_mean": float(np.mean(e3)), "sigma3_error_rms": float(np.sqrt(np.mean(e3 ** 2))),
+            "sigma3_error_max_abs": float(np.max(np.abs(e3))),
+            "sigma3_error_max_abs_smoothed": float(np.max(np.abs(e3s))), "smoothing_rows": w,
+            "peak_stress_ratio": float(np.max(a["sigma1"][shear] / a["sigma3"][shear])),
+        }
+        vb, vhh = controls["volume_boundary"], controls["volume_hull"]
+        summ["volume_methods"] = {
+            "boundary_over_hull_max_dev": float(np.max(np.abs(vb / vhh - 1))),
+            "volumetric_strain_max_abs_diff": float(np.max(np.abs(controls["volumetric_strain"] -
+                                                                  controls["volumetric_strain_hull"]))),
+        }
+    write_json(Path(run_dir) / "triaxial.json", summ)
+    walls = {
+        "platen_top": {"time": s["time"], "position": np.column_stack([0 * st, 0 * st, s["z_top"]]),
+                       "force": np.column_stack([0 * st, 0 * st, -s["f_top"]])},
+        "platen_bottom": {"time": s["time"], "position": np.column_stack([0 * st, 0 * st, s["z_bottom"]]),
+                          "force": np.column_stack([0 * st, 0 * st, s["f_bottom"]])},
+        "triaxial": {"time": s["time"], "step": st, "stage": s["stage"], "sigma1": a["sigma1"],
+                     "sigma3": a["sigma3"], "axial_strain": a["axial_strain"],
+                     "volumetric_strain": a["volumetric_strain"], "volume": s["volume"],
+                     "applied_pressure": s["pressure"], "lateral_area": s["area_lateral"]},
+    }
+    return {"controls": controls, "walls": walls}
+
+
+def _frame_positions_liggghts(run_dir: Path):
+    from engines.liggghts import read_dump
+    from ..particles_io import read_particle_table
+    files = sorted((Path(run_dir) / "dump").glob("frame.*.txt"), key=lambda p: int(p.name.split(".")[1]))
+    ids = read_particle_table(Path(run_dir) / "particles.txt")["id"]
+    row = {int(i): k for k, i in enumerate(ids)}
+    steps = np.array([int(f.name.split(".")[1]) for f in files])
+
+    def positions(k):
+        _, cols, a = read_dump(files[k])
+        out = np.full((len(ids), 3), np.nan)
+        rows = [row[int(i)] for i in a[:, cols.index("id")]]
+        out[rows] = a[:, [cols.index(c) for c in ("x", "y", "z")]]
+        return out
+    return steps, positions
+
+
+def _frame_positions_yade(run_dir: Path):
+    chunks = sorted((Path(run_dir) / "dump").glob("chunk.*.npz"), key=lambda p: int(p.name.split(".")[1]))
+    steps, refs, seen = [], [], set()
+    for c in chunks:
+        d = np.load(c)
+        for k, it in enumerate(d["iter"]):
+            if int(it) in seen:
+                continue
+            seen.add(int(it))
+            steps.append(int(it))
+            refs.append((c, k))
+
+    def positions(k):
+        c, kk = refs[k]
+        return np.load(c)["position"][kk]
+    return np.array(steps), positions
+
+
+def liggghts_extras(run_dir, params) -> dict:
+    steps, positions = _frame_positions_liggghts(run_dir)
+    return compute_extras(run_dir, params, steps, positions)
+
+
+def yade_extras(run_dir, params) -> dict:
+    steps, positions = _frame_positions_yade(run_dir)
+    return compute_extras(run_dir, params, steps, positions)
