@@ -1,0 +1,132 @@
+"""Command group: ``orchestrator compare A B``, ``orchestrator crossval CASE``, ``orchestrator report RUN``."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def _parse_options(items) -> dict:
+    """``--option measure.key=value`` (value parsed as JSON when possible) and ``--states all``."""
+    out: dict = {}
+    for it in items or []:
+        if "=" not in it or "." not in it.split("=", 1)[0]:
+            raise SystemExit(f"--option {it!r}: expected MEASURE.KEY=VALUE, e.g. d2min.cutoff_d50=1.5")
+        key, val = it.split("=", 1)
+        m, k = key.split(".", 1)
+        try:
+            v = json.loads(val)
+        except ValueError:
+            v = val
+        out.setdefault(m, {})[k] = v
+    return out
+
+
+def _print_table(cmp, con):
+    from rich.table import Table
+    t = Table(title=f"{cmp.alignment.a.label} vs {cmp.alignment.b.label} (states by {cmp.alignment.control})")
+    for c in ("measure", "quantity", "state", "metric", "distance", "note"):
+        t.add_column(c, justify="right" if c == "distance" else "left")
+    for _, r in cmp.table.iterrows():
+        d = r["distance"]
+        ds = "" if d != d else f"{d:.3g}"
+        note = str(r["note"] or "")
+        if r.get("substitutions"):
+            note = (note + " [subst: " + str(r["substitutions"]) + "]").strip()
+        t.add_row(str(r["measure"]), str(r["quantity"]), str(r["state"]), str(r["metric"]), ds, note[:90])
+    con.print(t)
+    if cmp.grain is not None:
+        g = cmp.grain.scalars
+        con.print(f"grain by grain ({g['identity']}, {g['grains_identified']} grains): median trajectory error up to "
+                  f"{g['max_median_error_d50']:.3g} d50, displacement agrees for {100 * g['final_fraction_agree']:.1f} % "
+                  "at the last state")
+
+
+def cmd_compare(args) -> int:
+    from rich.console import Console
+    from .core import compare
+    con = Console()
+    opts = _parse_options(args.option)
+    if args.states:
+        opts["states"] = args.states
+    out = Path(args.out) if args.out else Path("compare") / f"{Path(args.a).name}__vs__{Path(args.b).name}"
+    cmp = compare(args.a, args.b, out_dir=out, measures=args.measure, options=opts, control=args.control,
+                  tolerance=args.tolerance, frame=args.frame, identity=not args.no_identity,
+                  max_distance=args.max_distance, grain_atol_d50=args.atol, grain_rtol=args.rtol)
+    _print_table(cmp, con)
+    con.print(f"wrote {cmp.files['table']} and {cmp.files['html']}")
+    return 0
+
+
+def cmd_crossval(args) -> int:
+    from rich.console import Console
+    from .crossval import crossval
+    con = Console()
+    conc = {"auto": "auto", "yes": True, "no": False}[args.concurrent]
+    opts = _parse_options(args.option)
+    if args.states:
+        opts["states"] = args.states
+    cv = crossval(args.case, runs_root=args.runs, out_dir=args.out, concurrent=conc, force=args.force,
+                  measures=args.measure, options=opts)
+    for r in cv.engines:
+        con.print(f"[green]{r['engine']}[/green] {'reused' if r['reused'] else 'ran'} {r['run_dir']}: total "
+                  f"{(r['wall_time_total_s'] or 0):.1f} s, engine loop {(r['engine_loop_s'] or 0):.1f} s; "
+                  f"substitutions: {r['substitutions']}")
+    con.print(f"runs: {cv.mode}")
+    _print_table(cv.comparison, con)
+    con.print(f"wrote {cv.comparison.files['table']} and {cv.comparison.files['html']}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from .report import write_run_report
+    p = write_run_report(args.run, out=args.out, analyses=args.analysis, rerun=args.rerun)
+    print(f"wrote {p}")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    from .measures import MEASURES
+    c = sub.add_parser("compare", help="compare two runs or CT frame sets (any mix): table (CSV) and HTML report")
+    c.add_argument("a", help="run directory or frames.h5 (A, the reference)")
+    c.add_argument("b", help="run directory or frames.h5 (B)")
+    c.add_argument("--out", help="output directory (default compare/<A>__vs__<B>)")
+    c.add_argument("--measure", action="append", choices=MEASURES, help="measure to compare (repeatable; default all)")
+    c.add_argument("--control", help="control to match states by (axial_strain, angle, time …; default automatic)")
+    c.add_argument("--tolerance", type=float, help="largest control difference of matched states (SI)")
+    c.add_argument("--frame", choices=["none", "centroid", "rigid"], default="none",
+                   help="coordinate alignment of B onto A (default none: same world frame)")
+    c.add_argument("--no-identity", action="store_true", help="skip grain identity and the grain-by-grain errors")
+    c.add_argument("--max-distance", type=float, help="position-matching cut-off [m] (default d50/2)")
+    c.add_argument("--atol", type=float, default=0.1, help="displacement agreement: absolute tolerance [d50]")
+    c.add_argument("--rtol", type=float, default=0.2, help="displacement agreement: relative tolerance")
+    c.add_argument("--states", choices=["ends", "all"], help="single-frame measures at the first and last (ends) "
+                                                             "or all matched states")
+    c.add_argument("--option", action="append", metavar="MEASURE.KEY=VALUE", help="analysis option, e.g. "
+                   "d2min.cutoff_d50=1.5 (repeatable; value as JSON)")
+    c.set_defaults(func=cmd_compare)
+
+    x = sub.add_parser("crossval", help="run a case on both engines (concurrently when 2 cores are free) and compare")
+    x.add_argument("case", help="case YAML file")
+    x.add_argument("--runs", default="runs", help="runs directory (default ./runs)")
+    x.add_argument("--out", help="output directory (default RUNS/<case>/crossval)")
+    x.add_argument("--concurrent", choices=["auto", "yes", "no"], default="auto")
+    x.add_argument("--force", action="store_true", help="redo complete runs")
+    x.add_argument("--measure", action="append", choices=MEASURES)
+    x.add_argument("--states", choices=["ends", "all"])
+    x.add_argument("--option", action="append", metavar="MEASURE.KEY=VALUE")
+    x.set_defaults(func=cmd_crossval)
+
+    r = sub.add_parser("report", help="self-contained HTML page of one run (case, substitutions, checks, "
+                                      "run time, analyses)")
+    r.add_argument("run", help="run directory")
+    r.add_argument("--out", help="HTML file (default RUN/report.html)")
+    r.add_argument("--analysis", action="append", help="analysis to run and show (repeatable; default the case's "
+                                                       "list, else the scene's default set)")
+    r.add_argument("--rerun", action="store_true", help="recompute analyses already in RUN/analysis")
+    r.set_defaults(func=cmd_report)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    from ..cli import main
+    sys.exit(main(sys.argv[1:]))
