@@ -136,6 +136,19 @@ class TimeStep(Strict):
         return v
 
 
+class StabilityOptions(Strict):
+    """Pre-run stability check and in-deck monitors (orchestrator.stability). A dt above
+    ``safe_fraction`` of any stability limit is refused unless ``timestep.allow_unsafe``."""
+    safe_fraction: float = Field(0.5, gt=0, le=1, description="largest accepted dt / stability limit")
+    monitors: bool = Field(True, description="in-deck monitors stop an unstable run early")
+    monitor_checks: int = Field(100, ge=1, description="monitor checks per run")
+    ke_factor: float = Field(100.0, gt=1, description="kinetic energy limit / (1/2 M v_max^2 + M g H)")
+    overlap_limit: float = Field(0.15, gt=0, lt=1, description="largest overlap / r_min (raised to 4x the "
+                                                                "expected static overlap)")
+    wall_force_factor: float = Field(20.0, gt=1, description="wall force (and its swing between checks) "
+                                                               "limit / target force")
+
+
 class EngineOptions(Strict):
     """How to launch the engines: MPI ranks for LIGGGHTS, threads for YADE, a wall-clock limit."""
     mpi_ranks: int = Field(1, ge=1)
@@ -181,6 +194,7 @@ class Case(Strict):
     scene: Any
     output: Output = Field(default_factory=Output)
     engine_options: EngineOptions = Field(default_factory=EngineOptions)
+    stability: StabilityOptions = Field(default_factory=StabilityOptions)
     analysis: list[str | dict] = Field(default_factory=list)
 
     @field_validator("analysis")

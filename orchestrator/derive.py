@@ -297,6 +297,11 @@ def derive(case) -> dict:
             "calibrated_at_speed": v_max,
         }
     params["scene"] = mod.derive(case, params)
+    # every stability limit (Rayleigh, Hertz at the largest speed incl. walls, damping, rolling and
+    # twisting springs, skin) and the in-deck monitors' thresholds (orchestrator.stability.checks)
+    from .stability.checks import check, monitor_limits
+    params["stability"] = check(case, params)
+    params["monitors"] = monitor_limits(case, params, params["stability"])
     return params
 
 

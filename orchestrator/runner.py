@@ -114,6 +114,8 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     old = read_summary(run_dir)
     if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
         return RunOutcome(run_dir, "complete", old, reused=True)
+    if old and old.get("status") == "unstable" and not force and not dry_run:
+        return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
     if force and run_dir.exists():
         shutil.rmtree(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -162,6 +164,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         "run_dir": str(run_dir), "deck": deck.name, "status": "rendered" if dry_run else "running",
         "steps": params["scene"].get("total_steps", params["scene"]["steps"]),
         "dt": params["dt"], "dt_critical": params["dt_critical"], "dt_fraction": params["dt_fraction"],
+        "stability": {k: params["stability"][k] for k in ("limits", "fractions", "binding", "dt_max_safe", "ok",
+                                                          "forced")} if "stability" in params else None,
         "estimated_engine_time_s": estimate,
         "substitutions": [s.as_dict() for s in subs],
         "wall_time": timings, "resumed_from": resume,
@@ -172,15 +176,22 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     write_json(run_dir / "summary.json", summary)
     progress = case.engine_options.progress if progress is None else progress
     t1 = time.perf_counter()
+    from .stability.monitors import read_verdict
     try:
         res = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress)
     except EngineError as exc:
+        unstable = read_verdict(run_dir, params["dt"], failed=True)
+        if unstable is not None:
+            return _mark_unstable(run_dir, summary, unstable, time.perf_counter() - t1)
         summary["status"] = "failed"
         summary["error"] = str(exc)
         summary["wall_time"]["engine"] = time.perf_counter() - t1
         write_json(run_dir / "summary.json", summary)
         raise
     timings["engine"] = time.perf_counter() - t1
+    unstable = read_verdict(run_dir, params["dt"])
+    if unstable is not None:
+        return _mark_unstable(run_dir, summary, unstable, timings["engine"])
     # the engine's own integration time: engine - loop = process start-up, reading, writing
     timings["engine_loop"] = eng.loop_time(run_dir / "engine.log")
     t2 = time.perf_counter()
@@ -202,6 +213,17 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     summary["wall_time"] = timings
     write_json(run_dir / "summary.json", summary)
     return RunOutcome(run_dir, "complete", summary)
+
+
+def _mark_unstable(run_dir, summary, unstable: dict, engine_time: float) -> RunOutcome:
+    """The monitors stopped the run (orchestrator.stability.monitors): status 'unstable', with the
+    figure that tripped, its value and limit, and the step and time."""
+    summary["status"] = "unstable"
+    summary["unstable"] = unstable
+    summary["wall_time"]["engine"] = engine_time
+    summary["wall_time"]["total"] = sum(v for k, v in summary["wall_time"].items() if k != "total")
+    write_json(run_dir / "summary.json", summary)
+    return RunOutcome(run_dir, "unstable", summary)
 
 
 def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):

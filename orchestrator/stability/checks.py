@@ -1,0 +1,198 @@
+"""Pre-run stability checks: every critical time step a case implies, the chosen dt as a fraction
+of each, and the limits the in-deck monitors trip on. All SI.
+
+Limits (each for the *stiffest* contact the case can produce):
+
+- ``rayleigh``: Rayleigh-wave step of the smallest sphere, π r_min √(ρ/G)/(0.1631ν+0.8766)
+  (Li, Xu & Thornton 2005);
+- ``hertz``: central-difference stability 2/ω of the stiffest Hertz contact, ω² = k_tan/m*,
+  k_tan = dF/dδ = 2E*√(R*δ) at the largest expected overlap δ: the larger of the elastic impact
+  overlap at the largest expected relative speed (particle speeds *and* wall speeds, doubled for
+  a rebound off a moving wall) and the static overlap under the confining force (plus adhesion);
+  computed for two smallest spheres (the largest k/m*) and for the smallest sphere on a wall;
+- ``contact_time``: the Hertz contact time t_c at that speed: dt ≤ t_c/10 resolves a collision
+  (an accuracy limit; the safe fraction of it is 1);
+- ``rolling`` / ``twisting``: 2/ω of the rolling (twisting) spring on the rotational inertia of
+  the smallest sphere, ω² = k_r/(I/2), I = 2/5 m r²; k_r is YADE's absolute ``krot`` or
+  LIGGGHTS' epsd2 k_r = 2.25 k_n μ_r² R*² (whichever is larger);
+- ``skin``: a wall or grain may move at most half the neighbour skin per step, v dt ≤ skin/2.
+
+Every contact limit is multiplied by √(1+ζ²) − ζ, ζ the damping ratio of the restitution
+(central differences with viscous damping; Belytschko, Liu & Moran 2000, eq. 6.3.40).
+
+A dt above ``stability.safe_fraction`` of any stability limit (``contact_time``: above t_c/10)
+is refused unless ``timestep.allow_unsafe``; :func:`check` raises
+:class:`orchestrator.derive.DerivationError` with every number.
+"""
+from __future__ import annotations
+
+import math
+
+from ..derive import (DerivationError, damping_ratio, hertz_contact_time, hertz_max_overlap,
+                      rayleigh_time_step)
+
+#: limits that are about stability (dt must stay below safe_fraction × limit)
+STABILITY_LIMITS = ("rayleigh", "hertz", "rolling", "twisting", "skin")
+#: a collision spans at least this many steps (accuracy; derive.HERTZ_STEPS_PER_CONTACT)
+STEPS_PER_CONTACT = 10
+
+
+def scene_inputs(case, params: dict) -> dict:
+    """What the checks need from the scene: confining stress [Pa], wall speeds [m/s], neighbour
+    skin [m], height of the granular region [m], contact spring constants. A scene module may
+    provide ``stability_inputs(case, params)``; otherwise the known scene keys are read."""
+    from ..scenes import scene_module
+    mod = scene_module(case.scene.kind)
+    sc = params.get("scene", {})
+    if hasattr(mod, "stability_inputs"):
+        out = dict(mod.stability_inputs(case, params))
+    else:
+        out = {}
+        walls = {}
+        if "servo" in sc:
+            walls["servo"] = sc["servo"]["v_max"]
+        if "omega" in sc and "geometry" in sc:
+            walls["rotating_rim"] = sc["omega"] * sc["geometry"]["R_cyl"]
+        out["wall_speeds"] = walls
+        out["confining_stress"] = getattr(case.scene, "normal_stress", 0.0) or 0.0
+        out["skin"] = sc.get("skin", 0.5 * params["r_max"])
+        lo, hi = sc.get("box_lo"), sc.get("box_hi")
+        out["height"] = (hi[2] - lo[2]) if lo and hi else 0.0
+        if "servo" in sc:
+            out["wall_force_target"] = sc["servo"]["target_force"]
+    out.setdefault("wall_speeds", {})
+    out.setdefault("confining_stress", 0.0)
+    out.setdefault("skin", 0.5 * params["r_max"])
+    out.setdefault("height", 0.0)
+    c = sc.get("contact", {}) if isinstance(sc.get("contact"), dict) else {}
+    out.setdefault("adhesion_force", c.get("adhesion_force", 0.0))
+    out.setdefault("yade_krot", c.get("yade_krot"))
+    out.setdefault("rolling_coefficient", c.get("rolling_coefficient"))
+    out.setdefault("yade_ktwist", c.get("yade_ktwist"))
+    out.setdefault("torsion_coefficient", c.get("torsion_coefficient"))
+    return out
+
+
+def _static_overlap(F: float, E_eff: float, R_eff: float) -> float:
+    """Hertz overlap [m] under a normal force F [N]."""
+    return (3 * F / (4 * E_eff * math.sqrt(R_eff))) ** (2 / 3) if F > 0 else 0.0
+
+
+def critical_steps(case, params: dict) -> dict:
+    """All limits [s] and the inputs they came from (see the module docstring)."""
+    mat = case.material
+    E, nu, rho = mat.youngs_modulus, mat.poisson_ratio, mat.density
+    r_min, r_max = params["r_min"], params["r_max"]
+    m_min = rho * 4 / 3 * math.pi * r_min ** 3
+    inp = scene_inputs(case, params)
+    v_walls = max(inp["wall_speeds"].values(), default=0.0)
+    # particle speeds from the scene (derive's v_max) and twice any wall speed (rebound off a wall)
+    v = max(params["v_max"], 2 * v_walls)
+    sc_c = params.get("scene", {}).get("contact")
+    e = case.contact.restitution
+    if isinstance(sc_c, dict) and isinstance(sc_c.get("restitution"), dict):
+        e = min(e, sc_c["restitution"].get("target", e))     # e.g. the restitution seed000 damping delivers
+    zeta = damping_ratio(e)
+    fd = math.sqrt(1 + zeta ** 2) - zeta
+    sigma = inp["confining_stress"]
+    F_adh = inp["adhesion_force"] or 0.0
+    # a big grain's share of the confining force, pressed onto the smallest contact (conservative)
+    F_conf = sigma * (2 * r_max) ** 2 / 0.6 + F_adh
+    pairs = {"particle-particle": (m_min / 2, r_min / 2, params["E_eff_pp"]),
+             "particle-wall": (m_min, r_min, params["E_eff_pw"])}
+    hertz, tc, detail = math.inf, math.inf, {}
+    for name, (m, R, Es) in pairs.items():
+        d_imp = hertz_max_overlap(m, R, Es, v) if v > 0 else 0.0
+        d_sta = _static_overlap(F_conf, Es, R)
+        d = max(d_imp, d_sta, 1e-12 * R)
+        k_tan = 2 * Es * math.sqrt(R * d)
+        w = math.sqrt(k_tan / m)
+        t_c = hertz_contact_time(m, R, Es, v) if v > 0 else math.inf
+        detail[name] = {"overlap": d, "overlap_impact": d_imp, "overlap_static": d_sta, "k_tangent": k_tan,
+                        "omega": w, "contact_time": t_c}
+        hertz = min(hertz, 2 / w * fd)
+        tc = min(tc, t_c)
+    limits = {"rayleigh": rayleigh_time_step(r_min, rho, E, nu) * fd, "hertz": hertz,
+              "contact_time": tc * fd / STEPS_PER_CONTACT}
+    I_half = 0.5 * 0.4 * m_min * r_min ** 2
+    kn = detail["particle-particle"]["k_tangent"]
+    R_pp = r_min / 2
+    k_r = [k for k in (inp["yade_krot"],
+                       2.25 * kn * inp["rolling_coefficient"] ** 2 * R_pp ** 2 if inp["rolling_coefficient"] else None)
+           if k]
+    if k_r:
+        limits["rolling"] = 2 / math.sqrt(max(k_r) / I_half) * fd
+    k_t = [k for k in (inp["yade_ktwist"],
+                       2.25 * kn * inp["torsion_coefficient"] ** 2 * R_pp ** 2 if inp["torsion_coefficient"] else None)
+           if k]
+    if k_t:
+        limits["twisting"] = 2 / math.sqrt(max(k_t) / I_half) * fd
+    skin = inp["skin"]
+    if v > 0 and skin > 0:
+        limits["skin"] = 0.5 * skin / v
+    return {"limits": limits, "damping_ratio": zeta, "damping_factor": fd, "speed": v,
+            "wall_speeds": inp["wall_speeds"], "confining_stress": sigma, "confining_force": F_conf,
+            "skin": skin, "contacts": detail, "inputs": inp}
+
+
+def safe_fractions(case) -> dict:
+    sf = case.stability.safe_fraction
+    return {k: (1.0 if k == "contact_time" else sf) for k in ("rayleigh", "hertz", "contact_time", "rolling",
+                                                              "twisting", "skin")}
+
+
+def check(case, params: dict) -> dict:
+    """The stability report for ``params['dt']``; raises DerivationError when dt is above a safe
+    fraction of any limit and the case does not set ``timestep.allow_unsafe``."""
+    cs = critical_steps(case, params)
+    dt = params["dt"]
+    safe = safe_fractions(case)
+    fractions = {k: dt / v for k, v in cs["limits"].items()}
+    over = {k: f for k, f in fractions.items() if f > safe[k]}
+    binding = min(cs["limits"], key=lambda k: cs["limits"][k] * safe[k])
+    dt_max = cs["limits"][binding] * safe[binding]
+    report = {"dt": dt, "limits": cs["limits"], "fractions": fractions, "safe_fractions": safe,
+              "binding": binding, "dt_max_safe": dt_max, "dt_max_safe_fraction_of_critical": dt_max / params["dt_critical"],
+              "ok": not over, "forced": bool(over) and case.timestep.allow_unsafe,
+              "damping_factor": cs["damping_factor"], "damping_ratio": cs["damping_ratio"],
+              "speed": cs["speed"], "wall_speeds": cs["wall_speeds"], "confining_stress": cs["confining_stress"],
+              "skin": cs["skin"], "contacts": cs["contacts"]}
+    if over and not case.timestep.allow_unsafe:
+        lines = [f"{k}: dt/limit = {fractions[k]:.3g} > {safe[k]:g} (limit {cs['limits'][k]:.3e} s)" for k in over]
+        raise DerivationError(
+            f"stability: dt = {dt:.3e} s is unsafe: " + "; ".join(lines)
+            + f". Limits include the damping factor {cs['damping_factor']:.3f} (zeta = {cs['damping_ratio']:.3f}); "
+            f"largest expected speed {cs['speed']:.3g} m/s (walls: "
+            + (", ".join(f"{n} {s:.3g} m/s" for n, s in cs["wall_speeds"].items()) or "none")
+            + f"), confining stress {cs['confining_stress']:.3g} Pa, skin {cs['skin']:.3g} m. "
+            f"The largest safe dt is {dt_max:.3e} s ({binding}); lower timestep.fraction or dt, "
+            "or set timestep.allow_unsafe: true to run anyway (the monitors still watch the run)")
+    return report
+
+
+def monitor_limits(case, params: dict, report: dict) -> dict:
+    """Thresholds for the in-deck monitors (handed to the templates as ``p.monitors``)."""
+    o = case.stability
+    sc = params["scene"]
+    n = int(sc.get("n", len(sc.get("ids", [])) or 0))
+    rho = case.material.density
+    r_min, r_max = params["r_min"], params["r_max"]
+    steps = int(sc.get("total_steps", sc.get("steps", 0)))
+    inp = scene_inputs(case, params)
+    m_mean = rho * 4 / 3 * math.pi * ((r_min + r_max) / 2) ** 3
+    mass = n * m_mean
+    v = report["speed"]
+    ke_scale = 0.5 * mass * v ** 2 + mass * abs(case.gravity) * inp["height"]
+    ke_scale = max(ke_scale, 0.5 * mass * (1e-3 * math.sqrt(case.material.youngs_modulus / rho)) ** 2 * 1e-6)
+    expected = max(c["overlap"] for c in report["contacts"].values()) / r_min
+    out = {"enabled": bool(o.monitors), "every": max(1, steps // o.monitor_checks) if steps else 1000,
+           "ke_limit": o.ke_factor * ke_scale, "ke_scale": ke_scale,
+           "overlap_limit": min(0.9, max(o.overlap_limit, 4 * expected)), "r_min": r_min,
+           "n_particles": n, "wall_force_target": inp.get("wall_force_target"),
+           "wall_force_factor": o.wall_force_factor}
+    if sc.get("box_lo") is not None:
+        out["box_lo"], out["box_hi"] = list(sc["box_lo"]), list(sc["box_hi"])
+        out["periodic"] = list(inp.get("periodic", [False, False, False]))
+    if out["wall_force_target"]:
+        out["wall_force_limit"] = o.wall_force_factor * out["wall_force_target"]
+    return out
