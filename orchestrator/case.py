@@ -168,6 +168,12 @@ class Output(Strict):
     contacts: bool = False
 
 
+class InitialPacking(Strict):
+    """A frame of a frames.h5 (a CT scan or a run) as the initial packing (orchestrator.initial_packing)."""
+    frames: str = Field(description="frames.h5 or run directory; relative paths are relative to the case file")
+    frame: int = Field(0, description="frame index (negative counts from the end)")
+
+
 # ---------------------------------------------------------------------------------------------
 # The case
 # ---------------------------------------------------------------------------------------------
@@ -196,6 +202,7 @@ class Case(Strict):
     engine_options: EngineOptions = Field(default_factory=EngineOptions)
     stability: StabilityOptions = Field(default_factory=StabilityOptions)
     analysis: list[str | dict] = Field(default_factory=list)
+    initial_packing: InitialPacking | None = None
 
     @field_validator("analysis")
     @classmethod
@@ -338,6 +345,9 @@ def load_case(path, overrides: dict | None = None, check_timestep: bool = True) 
     data = read_case_data(path)
     if overrides:
         data = _merge(data, overrides)
+    ip = data.get("initial_packing")
+    if isinstance(ip, dict) and isinstance(ip.get("frames"), str) and not Path(ip["frames"]).is_absolute():
+        data["initial_packing"] = dict(ip, frames=str((path.parent / ip["frames"]).resolve()))
     return case_from_dict(data, source=path, check_timestep=check_timestep)
 
 

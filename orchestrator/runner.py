@@ -28,6 +28,9 @@ from .particles_io import write_particle_table
 #: measured single-core throughput [particle-steps/s] used for run-time estimates when no
 #: benchmark result is stored (ENGINES.md: 2000 dense Hertz spheres on this machine).
 DEFAULT_THROUGHPUT = {"liggghts": 6e6, "yade": 1.5e6}
+#: process start-up and set-up [s] measured on this machine (tiny verification cases: total engine
+#: time minus the engines' own loop time)
+DEFAULT_STARTUP = {"liggghts": 0.5, "yade": 2.0}
 
 
 @dataclass
@@ -54,6 +57,9 @@ def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | N
     h.update(engine_name.encode())
     h.update(engine_version.encode())
     h.update(templates_hash(engine_name, case.scene.kind).encode())
+    if getattr(case, "initial_packing", None) is not None:
+        from .initial_packing import packing_digest
+        h.update(packing_digest(case.initial_packing).encode())
     return h.hexdigest()[:12]
 
 
@@ -80,7 +86,7 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     n = sc.get("n", len(sc.get("ids", [])))
     steps = sc.get("total_steps", sc["steps"])
     ranks = case.engine_options.mpi_ranks if engine_name == "liggghts" else case.engine_options.threads
-    return steps * max(n, 1) / (tp[engine_name] * ranks)
+    return DEFAULT_STARTUP[engine_name] + steps * max(n, 1) / (tp[engine_name] * ranks)
 
 
 def prepare(case: Case, engine_name: str, run_dir: Path) -> tuple[dict, list]:
@@ -92,12 +98,17 @@ def prepare(case: Case, engine_name: str, run_dir: Path) -> tuple[dict, list]:
     run_dir.mkdir(parents=True, exist_ok=True)
     write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
     mod = scene_module(case.scene.kind)
+    from .initial_packing import apply_initial_packing, verify_written
+    packing = apply_initial_packing(case, params, run_dir)      # None without case.initial_packing
     if hasattr(mod, "prepare"):
         params["files"] = mod.prepare(case, params, run_dir) or {}
     elif not (run_dir / "particles.txt").exists():
         sc = params["scene"]
         write_particle_table(run_dir / "particles.txt", sc["ids"], sc["radius"], case.material.density,
                              sc["position"], sc.get("velocity"))
+    if packing is not None:
+        verify_written(case, run_dir, packing)
+        params["initial_packing"] = packing
     write_json(run_dir / "params.json", params)
     return params, subs
 
