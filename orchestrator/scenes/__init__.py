@@ -23,6 +23,7 @@ SCENES = {
     "impact": "orchestrator.scenes.impact",
     "triaxial": "orchestrator.scenes.triaxial",
     "shear_cell": "orchestrator.scenes.shear_cell",
+    "plane_shear": "orchestrator.scenes.plane_shear",
 }
 
 

@@ -1,0 +1,373 @@
+"""Plane shear at a fixed normal stress, for the μ calibration of seed 000 §3.2.
+
+Geometry (z up): a box of L × L periodic in x and y, closed in z by two rough walls, each one
+layer of grains of the particle material on a square lattice. The walls are perpendicular to
+the velocity gradient (z); the top wall moves in the shear direction x, i.e. the confining
+walls are the ones the shear stress is measured on (seed: "confining walls perpendicular to the
+shear direction and periodic boundary conditions in all other directions"; we read the walls'
+normal as the gradient direction, the usual plane-shear set-up of the seed's refs. [3, 10]).
+Wall grains move as one rigid body; the bottom wall is fixed.
+
+Protocol, identical for both engines (absolute step ranges computed here):
+
+1. ``compress``: the grains, placed by random sequential addition at volume fraction
+   ``loose_fraction``, are compressed by the top wall under a proportional force servo
+   v_z = -v_max clamp(k_p (F_target - F_z)/F_target, -1, 1), F_target = σ L²; v_max from the
+   compression inertial number I_c = (v_max/H) x₅₀ √(ρ/σ). The stage lasts 1.5 × the travel time at
+   v_max plus ``settle_time_constants`` servo time constants.
+2. ``shear``: the top wall moves at v_x = I H x₅₀⁻¹ √(σ/ρ) (inertial number ``inertial_number``,
+   H the dense height estimate) up to the shear strain ``shear_strain``; the servo keeps σ.
+
+μ_macro = |F_x|/|F_z| on the top wall (time series ``walls/top``), its steady state the mean
+over the shear strain ≥ ``steady_from`` × ``shear_strain``.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, field_validator
+
+from ..case import Strict
+from ..derive import DerivationError
+from ..units import Pressure
+from .shear_cell import PSD
+
+CONTROLS: tuple[str, ...] = ("strain", "stage")
+STAGES = {"initial": 0, "compressed": 1, "shear": 2}
+
+
+class Scene(Strict):
+    kind: Literal["plane_shear"]
+    psd: PSD = Field(default_factory=PSD)
+    n_particles: int = Field(300, ge=10, description="mobile grains between the walls (seed: 10 000)")
+    width: float = Field(6.0, ge=3, description="periodic box side L in median diameters")
+    loose_fraction: float = Field(0.3, gt=0, le=0.35, description="volume fraction of the initial RSA packing")
+    dense_fraction: float = Field(0.6, gt=0, lt=0.75, description="assumed fraction after compression (estimates)")
+    normal_stress: Pressure = "15 kPa"
+    inertial_number: float = Field(1e-3, gt=0, description="I = gamma_dot x50 sqrt(rho/sigma) of the shear")
+    compression_inertial_number: float = Field(1e-2, gt=0)
+    servo_gain: float = Field(1.0, gt=0)
+    settle_time_constants: float = Field(40.0, ge=0)
+    shear_strain: float = Field(2.0, gt=0, description="total shear strain of the shear stage")
+    steady_from: float = Field(0.5, ge=0, lt=1, description="steady state from this fraction of shear_strain")
+    wall_samples: int = Field(400, ge=10, description="wall series samples over the whole run")
+    shear_frames: int = Field(4, ge=1, description="frames written during shear")
+    wall_grain_diameter: float = Field(1.0, gt=0, description="wall grain diameter in median diameters")
+
+    @field_validator("normal_stress")
+    @classmethod
+    def _pos(cls, v):
+        if v <= 0:
+            raise ValueError(f"normal_stress must be positive, got {v:g} Pa")
+        return v
+
+
+def size_range(case) -> tuple[float, float]:
+    p = case.scene.psd
+    return p.d_min / 2, max(p.d_max / 2, p.median * case.scene.wall_grain_diameter / 2)
+
+
+def required_features(case) -> list[str]:
+    c = case.contact
+    feats = ["hertz", "restitution_damping", "periodic"]
+    if c.friction > 0:
+        feats.append("sliding_friction")
+    if _adhesion_force(case) > 0:
+        feats.append("adhesion")
+    if c.rolling is not None or c.torsion is not None:
+        raise DerivationError("contact.rolling / contact.torsion: the plane-shear scene has no rolling or twisting "
+                              "resistance yet; remove them (the shear cell has both)")
+    if c.damping != "restitution":
+        raise DerivationError("contact.damping: the plane-shear scene uses 'restitution' damping")
+    return feats
+
+
+def _adhesion_force(case) -> float:
+    a = case.contact.adhesion
+    if a is None:
+        return 0.0
+    if a.force is not None:
+        return a.force
+    return 4 * math.pi * a.surface_energy * case.scene.psd.median / 4
+
+
+def _mean_volume(s) -> float:
+    from ..psd import mean_sphere_volume
+    p = s.psd
+    return mean_sphere_volume(p.median, p.d_min, p.d_max, p.sigma_ln)
+
+
+def _time_scale(case) -> float:
+    """x50 √(ρ/σ) [s]: the inertial time of a grain under the normal stress."""
+    s = case.scene
+    return s.psd.median * math.sqrt(case.material.density / s.normal_stress)
+
+
+def geometry(case) -> dict:
+    s = case.scene
+    x50 = s.psd.median
+    L = s.width * x50
+    d_w = s.wall_grain_diameter * x50
+    nw = max(3, int(math.floor(L / d_w)))
+    v_mean = _mean_volume(s)
+    H_loose = s.n_particles * v_mean / (s.loose_fraction * L * L)
+    H_dense = s.n_particles * v_mean / (s.dense_fraction * L * L)
+    gap = 0.55 * s.psd.d_max
+    z_bot = d_w                                 # centres of the bottom wall grains
+    z_pack = [z_bot + d_w / 2 + gap, z_bot + d_w / 2 + gap + H_loose]
+    z_top = z_pack[1] + gap + d_w / 2           # centres of the top wall grains at the start
+    z_top_dense = z_bot + d_w + H_dense          # estimate after compression
+    return {"L": L, "d_wall": d_w, "n_wall_side": nw, "n_wall": nw * nw, "H_loose": H_loose, "H_dense": H_dense,
+            "z_bottom": z_bot, "z_top": z_top, "z_top_dense": z_top_dense, "z_pack": z_pack,
+            "box_lo": [0.0, 0.0, 0.0], "box_hi": [L, L, z_top + 3 * d_w + H_loose]}
+
+
+def _speeds(case, g=None) -> tuple[float, float]:
+    s = case.scene
+    g = g or geometry(case)
+    T = _time_scale(case)
+    return s.compression_inertial_number * g["H_dense"] / T, s.inertial_number * g["H_dense"] / T
+
+
+def max_velocity(case) -> float:
+    v_servo, v_shear = _speeds(case)
+    return 2 * max(v_servo, v_shear)
+
+
+def stability_inputs(case, params) -> dict:
+    sc = params["scene"]
+    return {"wall_speeds": {"servo": sc["servo"]["v_max"], "shear": sc["v_shear"]},
+            "confining_stress": case.scene.normal_stress, "skin": sc["skin"],
+            "height": sc["geometry"]["z_top"] - sc["geometry"]["z_bottom"],
+            "wall_force_target": sc["servo"]["target_force"], "periodic": [True, True, False],
+            "adhesion_force": sc["contact"]["adhesion_force"]}
+
+
+def derive(case, common: dict) -> dict:
+    s = case.scene
+    g = geometry(case)
+    dt = common["dt"]
+    rho = case.material.density
+    x50 = s.psd.median
+    v_max, v_shear = _speeds(case, g)
+    F_target = s.normal_stress * g["L"] ** 2
+    E_pp = common["E_eff_pp"]
+    E_bulk = (E_pp ** 2 * s.normal_stress) ** (1 / 3)
+    k_bulk = E_bulk * g["L"] ** 2 / g["H_dense"]
+    tau_servo = F_target / (v_max * s.servo_gain * k_bulk)
+    travel = max(0.0, g["z_top"] - g["z_top_dense"])
+    n_compress = int(math.ceil((1.5 * travel / v_max + s.settle_time_constants * tau_servo) / dt))
+    gamma_dot = v_shear / g["H_dense"]
+    n_shear = int(math.ceil(s.shear_strain / gamma_dot / dt))
+    s1, s2 = n_compress, n_compress + n_shear
+    skin = max(0.25 * s.psd.d_max, 2.5 * max(v_max, v_shear) * dt)
+    if max(v_max, v_shear) * dt > skin / 2:
+        raise DerivationError(f"plane_shear: a wall moves {max(v_max, v_shear) * dt:.3g} m per step, more than half "
+                              f"the skin {skin:.3g} m")
+    shear_frames = [s1 + int(round(n_shear * (k + 1) / s.shear_frames)) for k in range(s.shear_frames)]
+    frame_steps = [0, s1] + shear_frames
+    if len(set(frame_steps)) != len(frame_steps):
+        raise DerivationError("plane_shear: two frames fall on one step; lower shear_frames")
+    frame_stage = [STAGES["initial"], STAGES["compressed"]] + [STAGES["shear"]] * s.shear_frames
+    wall_every = max(10, (s2 // s.wall_samples) // 10 * 10)
+    events = [{"step": st, "frame": st in frame_steps, "begin": "shear" if st == s1 else ""}
+              for st in sorted(set(frame_steps) | {s1, s2})]
+    n_mobile = s.n_particles
+    nw = g["n_wall"]
+    # contact terms
+    F_adh = _adhesion_force(case)
+    contact = {"adhesion_force": F_adh, "restitution": dict(common["restitution"])}
+    if F_adh > 0:
+        r_eff = x50 / 4
+        Fc = s.normal_stress * x50 ** 2 / (s.dense_fraction * 4 / math.pi) + F_adh
+        xi = (3 * Fc / (4 * E_pp * math.sqrt(r_eff))) ** (2 / 3)
+        contact["yade_gamma"] = F_adh / (4 * math.pi * r_eff)
+        contact["liggghts_cohesion_energy_density"] = F_adh / (2 * math.pi * r_eff * xi)
+        contact["expected_overlap"] = xi
+    return {
+        "n": n_mobile + 2 * nw, "n_mobile": n_mobile, "n_wall": nw,
+        "ids_mobile": [1, n_mobile], "ids_bottom": [n_mobile + 1, n_mobile + nw],
+        "ids_top": [n_mobile + nw + 1, n_mobile + 2 * nw],
+        "geometry": g, "box_lo": g["box_lo"], "box_hi": g["box_hi"],
+        "stages": {"compress": [0, s1], "shear": [s1, s2]}, "steps": s2, "total_steps": s2,
+        "events": events, "frame_steps": frame_steps, "frame_stage": frame_stage,
+        "dump_every": max(1, s2), "restart_every": max(1000, s2 // 5), "wall_every": wall_every,
+        "servo": {"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo,
+                  "travel": travel},
+        "v_shear": v_shear, "shear_rate": gamma_dot, "skin": skin,
+        "wall_mass": nw * rho * math.pi / 6 * g["d_wall"] ** 3,
+        "contact": contact, "gravity": case.gravity, "steady_from_strain": s.steady_from * s.shear_strain,
+    }
+
+
+# ------------------------------------------------------------------------------------------------
+def pack_box(radii, L: float, z_lo: float, z_hi: float, rng, max_tries: int = 500) -> np.ndarray:
+    """Random sequential addition of spheres (largest first) in [0, L)² (periodic) × [z_lo, z_hi]
+    (centres at least a radius from both z faces), no overlaps. Returns positions in input order."""
+    radii = np.asarray(radii, float)
+    n = len(radii)
+    order = np.argsort(-radii)
+    cell = 2 * radii.max()
+    nc = max(1, int(L // cell))
+    cxy = L / nc
+    grid: dict = {}
+    pos = np.full((n, 3), np.nan)
+    for k in order:
+        r = radii[k]
+        for _ in range(max_tries):
+            p = np.array([rng.uniform(0, L), rng.uniform(0, L), rng.uniform(z_lo + r, z_hi - r)])
+            ix, iy, iz = int(p[0] // cxy) % nc, int(p[1] // cxy) % nc, int(math.floor(p[2] / cell))
+            ok = True
+            for dx in (-1, 0, 1):
+                for dy in (-1, 0, 1):
+                    for dz in (-1, 0, 1):
+                        for j in grid.get(((ix + dx) % nc, (iy + dy) % nc, iz + dz), ()):
+                            d = p - pos[j]
+                            d[:2] -= L * np.round(d[:2] / L)
+                            if d @ d < (r + radii[j]) ** 2:
+                                ok = False
+                                break
+                        if not ok:
+                            break
+                    if not ok:
+                        break
+                if not ok:
+                    break
+            if ok:
+                pos[k] = p
+                grid.setdefault((ix, iy, iz), []).append(k)
+                break
+        else:
+            raise DerivationError(f"plane_shear: cannot place {n} grains at the loose fraction (RSA jammed); "
+                                  "lower scene.loose_fraction")
+    return pos
+
+
+def sample_particles(case, params) -> dict:
+    from ..psd import lognormal_diameters
+    s = case.scene
+    sc = params["scene"]
+    g = sc["geometry"]
+    rng = np.random.default_rng(case.seed)
+    d = lognormal_diameters(s.n_particles, s.psd.median, s.psd.d_min, s.psd.d_max, s.psd.sigma_ln, rng)
+    pos = pack_box(d / 2, g["L"], g["z_pack"][0], g["z_pack"][1], rng)
+    nw1 = g["n_wall_side"]
+    a = g["L"] / nw1
+    xy = (np.stack(np.meshgrid(np.arange(nw1), np.arange(nw1), indexing="ij"), -1).reshape(-1, 2) + 0.5) * a
+    bottom = np.column_stack([xy, np.full(len(xy), g["z_bottom"])])
+    top = np.column_stack([xy + 0.25 * a, np.full(len(xy), g["z_top"])])     # staggered: no aligned channels
+    top[:, :2] %= g["L"]
+    radius = np.concatenate([d / 2, np.full(2 * len(xy), g["d_wall"] / 2)])
+    position = np.vstack([pos, bottom, top])
+    return {"id": np.arange(1, len(radius) + 1), "radius": radius, "position": position}
+
+
+def prepare(case, params, run_dir) -> dict:
+    from ..particles_io import write_particle_table
+    run_dir = Path(run_dir)
+    table = run_dir / "particles.txt"
+    if not table.exists():
+        parts = sample_particles(case, params)
+        write_particle_table(table, parts["id"], parts["radius"], case.material.density, parts["position"])
+    data = run_dir / "particles.data"
+    if not data.exists():
+        from engines.liggghts import write_data_file
+        write_data_file(data, table, params["scene"]["box_lo"], params["scene"]["box_hi"])
+    return {"particles": str(table)}
+
+
+# ------------------------------------------------------------------------------------------------
+def _strain_of_step(params, steps):
+    sc = params["scene"]
+    s1 = sc["stages"]["shear"][0]
+    return np.clip(np.asarray(steps, float) - s1, 0, None) * params["dt"] * sc["shear_rate"]
+
+
+def _controls(params, steps) -> dict:
+    sc = params["scene"]
+    lookup = dict(zip(sc["frame_steps"], sc["frame_stage"]))
+    return {"strain": _strain_of_step(params, steps),
+            "stage": np.array([lookup.get(int(s), np.nan) for s in steps], float)}
+
+
+def _walls(params, a: np.ndarray) -> dict:
+    """Rows: step, z_top, Fx Fy Fz (top), Fx Fy Fz (bottom): forces the grains exert on each wall."""
+    a = a[np.argsort(a[:, 0], kind="stable")]
+    keep = np.concatenate([[True], np.diff(a[:, 0]) > 0])
+    a = a[keep]
+    t = a[:, 0] * params["dt"]
+    z = a[:, 1]
+    zero = np.zeros_like(z)
+    return {"top": {"time": t, "position": np.column_stack([zero, zero, z]), "force": a[:, 2:5],
+                    "strain": _strain_of_step(params, a[:, 0])},
+            "bottom": {"time": t, "force": a[:, 5:8]}}
+
+
+def liggghts_extras(run_dir, params) -> dict:
+    run_dir = Path(run_dir)
+    rows = [np.loadtxt(f, comments="#", ndmin=2) for f in sorted(run_dir.glob("walls.*.txt"))]
+    rows = [r for r in rows if r.size]
+    out = {"controls": _controls(params, params["scene"]["frame_steps"])}
+    if rows:
+        out["walls"] = _walls(params, np.vstack(rows))
+    return out
+
+
+def yade_extras(run_dir, params) -> dict:
+    run_dir = Path(run_dir)
+    rows = [np.load(f) for f in sorted(run_dir.glob("walls.yade.*.npy"))]
+    rows = [r for r in rows if r.size]
+    steps = []
+    for c in sorted((run_dir / "dump").glob("chunk.*.npz")):
+        steps += [int(i) for i in np.load(c)["iter"]]
+    out = {"controls": _controls(params, sorted(set(steps)))}
+    if rows:
+        out["walls"] = _walls(params, np.vstack(rows))
+    return out
+
+
+def mu_macro_series(frames) -> "pd.DataFrame":
+    """μ_macro(strain) = |F_x|/|F_z| on the top wall, from a run's frames.h5."""
+    import pandas as pd
+    w = frames.wall("top")
+    mu = np.abs(w["force_x"].to_numpy()) / np.abs(w["force_z"].to_numpy())
+    return pd.DataFrame({"time": w["time"], "strain": w["strain"], "mu": mu, "normal_force": w["force_z"],
+                         "shear_force": w["force_x"], "z_top": w["position_z"]})
+
+
+def steady_mu(frames, params_or_summary: dict | None = None, steady_from_strain: float | None = None) -> dict:
+    """Steady-state μ_macro: mean, standard deviation and standard error (over ~independent blocks)
+    of |F_x|/|F_z| for strain ≥ ``steady_from_strain`` (default: from the run's params)."""
+    df = mu_macro_series(frames)
+    if steady_from_strain is None:
+        steady_from_strain = (params_or_summary or {}).get("scene", {}).get("steady_from_strain", 0.0)
+    sel = df[(df.strain >= steady_from_strain) & (df.strain > 0)]
+    mu = sel["mu"].to_numpy()
+    if len(mu) == 0:
+        return {"mu": float("nan"), "std": float("nan"), "sem": float("nan"), "n": 0}
+    blocks = np.array_split(mu, min(8, len(mu)))
+    bm = np.array([b.mean() for b in blocks])
+    # μ from the mean forces (less biased by noise in F_z than the mean of the ratio)
+    mu_f = float(np.abs(sel["shear_force"]).mean() / np.abs(sel["normal_force"]).mean())
+    return {"mu": mu_f, "mu_mean_ratio": float(mu.mean()), "std": float(mu.std()),
+            "sem": float(bm.std(ddof=1) / math.sqrt(len(bm))) if len(bm) > 1 else float("nan"),
+            "n": int(len(mu)), "steady_from_strain": steady_from_strain,
+            "normal_stress_rel_error": float(np.abs(sel["normal_force"]).mean() / frames_target(frames) - 1)
+            if frames_target(frames) else float("nan")}
+
+
+def frames_target(frames) -> float | None:
+    try:
+        import json
+        meta = frames.meta
+        case = meta.get("case") if isinstance(meta, dict) else None
+        if isinstance(case, str):
+            case = json.loads(case)
+        s = case["scene"]
+        L = s["width"] * float(str(s["psd"]["median"]).split()[0])
+        return float(str(s["normal_stress"]).split()[0]) * L * L
+    except Exception:
+        return None
