@@ -9,10 +9,12 @@ from pathlib import Path
 
 def _console():
     from rich.console import Console
-    return Console()
+    return Console(soft_wrap=True)          # no hard wraps: output stays greppable in logs
 
 
 def _fmt_s(seconds: float) -> str:
+    if seconds < 1:
+        return f"{seconds * 1000:.0f} ms"
     if seconds < 120:
         return f"{seconds:.1f} s"
     if seconds < 7200:

@@ -1,0 +1,80 @@
+"""The command line as a user meets it: help, validate, engines, dry-run, verify, vtk, errors."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+VER = REPO / "cases" / "verification"
+
+
+def cli(*args, timeout=900):
+    return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True,
+                          text=True, timeout=timeout, cwd=REPO)
+
+
+@pytest.mark.parametrize("sub", ["run", "validate", "engines", "verify", "analyze", "vtk"])
+def test_help_on_each_command(sub):
+    out = cli(sub, "--help")
+    assert out.returncode == 0 and "usage: orchestrator " + sub in out.stdout
+
+
+def test_validate_good_and_bad(tmp_path):
+    ok = cli("validate", VER / "chung_ooi_4_oblique.yaml")
+    assert ok.returncode == 0 and "valid" in ok.stdout and "dt =" in ok.stdout
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((VER / "chung_ooi_4_oblique.yaml").read_text().replace("radius: 2.5 mm", "radius: 2.5")
+                   .replace("extends: _base_impact.yaml", f"extends: {VER / '_base_impact.yaml'}"))
+    out = cli("validate", bad)
+    assert out.returncode == 2
+    assert str(bad) in out.stderr and "scene.radius" in out.stderr and "has no unit" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+def test_missing_case_file_is_a_clear_error(tmp_path):
+    out = cli("run", tmp_path / "nope.yaml")
+    assert out.returncode == 2 and "file not found" in out.stderr and "Traceback" not in out.stderr
+
+
+@pytest.mark.engine
+def test_engines_lists_versions_and_capabilities(engines_installed):
+    out = cli("engines")
+    assert out.returncode == 0
+    assert "LIGGGHTS-PUBLIC 3.8" in out.stdout and "YADE 2023.02" in out.stdout
+    assert "membrane" in out.stdout and "substitute" in out.stdout
+
+
+@pytest.mark.engine
+def test_dry_run_renders_and_estimates(tmp_path, engines_installed):
+    out = cli("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.count("rendered") == 2 and "estimated engine time" in out.stdout
+    decks = list(tmp_path.glob("chung_ooi_4_oblique/liggghts-*/deck.in")) + \
+        list(tmp_path.glob("chung_ooi_4_oblique/yade-*/script.py"))
+    assert len(decks) == 2
+    assert not list(tmp_path.glob("**/frames.h5"))
+
+
+@pytest.mark.engine
+def test_verify_prints_a_table_per_engine(runs_root, engines_installed, tmp_path):
+    # reuses the runs tests/test_verification.py made in the same session (or makes them)
+    out = cli("verify", "--runs", runs_root, "--csv", tmp_path / "verify.csv", timeout=1800)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    assert "— liggghts" in out.stdout and "— yade" in out.stdout
+    assert "checks within tolerance" in out.stdout
+    import pandas as pd
+    t = pd.read_csv(tmp_path / "verify.csv")
+    assert set(t.engine) == {"liggghts", "yade"} and t["pass"].all()
+    assert {"contact_time", "peak_force", "e_n", "e_t", "max_overlap"} <= set(t.quantity)
+
+
+@pytest.mark.engine
+def test_vtk_export_of_a_run(runs_root, engines_installed):
+    out = cli("run", VER / "chung_ooi_1_sphere_sphere_glass.yaml", "--engine", "yade", "--runs", runs_root, "--quiet")
+    assert out.returncode == 0, out.stderr
+    run = next(Path(runs_root).glob("chung_ooi_1_sphere_sphere_glass/yade-*"))
+    out = cli("vtk", run, "--frame", "0")
+    assert out.returncode == 0 and (run / "vtk" / "frame_00000.vtu").exists()
