@@ -64,7 +64,9 @@ def fit_erf_profile(z, v, sigma=None) -> dict:
     chi2 = float(np.sum(res ** 2) / dof)
     err = np.sqrt(np.diag(cov))
     w = abs(p[1])
-    ok = bool(np.all(np.isfinite(err)) and zs[0] <= p[0] <= zs[-1] and w < 2 * span)
+    # a fit is usable only when it is determined: finite errors smaller than the profile's span
+    ok = bool(np.all(np.isfinite(err)) and zs[0] <= p[0] <= zs[-1] and w < 2 * span
+              and err[0] < span and err[1] < span)
     return {"z_sb": float(p[0]), "z_sb_err": float(err[0]), "w_sb": float(w), "w_sb_err": float(err[1]),
             "chi2_red": chi2, "ok": ok}
 
@@ -152,6 +154,11 @@ def analyze_shearband(frames, radii=None, dr: float | None = None, n_radii: int 
     cname, cvals = control_values(frames, control)
     pos = frames.position
     prs = frame_pairs(frames, pairs, interval, None, control, stride)
+    if isinstance(drive, str) and drive in frames.controls:
+        # only pairs across which the cell turned (frames before shearing have no rotation)
+        prs = [(a, b) for a, b in prs if frames.controls[drive][b] != frames.controls[drive][a]]
+        if not prs:
+            raise ValueError(f"shearband: the control {drive!r} does not change between any frame pair")
     first = pos[prs[0][0]]
     ok0 = present(first)
     lo, hi = np.nanmin(first[ok0], 0), np.nanmax(first[ok0], 0)
@@ -168,6 +175,16 @@ def analyze_shearband(frames, radii=None, dr: float | None = None, n_radii: int 
     prof, fits, band = [], [], []
     for k0, k1 in prs:
         p0, p1 = pos[k0], pos[k1]
+        if isinstance(drive, str) and drive not in ("max",):
+            if drive not in frames.controls:
+                raise KeyError(f"shearband: no control {drive!r} for the driving rotation; give drive=<rad> or 'max'")
+            dth = float(frames.controls[drive][k1] - frames.controls[drive][k0])
+        elif drive == "max":
+            dth = 1.0
+        else:
+            dth = float(drive)
+        if dth == 0:             # no driving rotation between these frames (before shearing)
+            continue
         if isinstance(center, str) and center == "fit":
             zz = p0[:, 2]
             top = present(p0) & (zz >= np.nanquantile(zz, 1 - top_fraction))
@@ -177,16 +194,6 @@ def analyze_shearband(frames, radii=None, dr: float | None = None, n_radii: int 
             c = axis_c
         else:
             c = np.asarray(center, float)[:2]
-        if isinstance(drive, str) and drive not in ("max",):
-            if drive not in frames.controls:
-                raise KeyError(f"shearband: no control {drive!r} for the driving rotation; give drive=<rad> or 'max'")
-            dth = float(frames.controls[drive][k1] - frames.controls[drive][k0])
-        elif drive == "max":
-            dth = 1.0
-        else:
-            dth = float(drive)
-        if dth == 0:
-            continue
         pr = angular_profiles(p0, p1, c, dth, radii, dr, z_edges, z_ref)
         if drive == "max":
             vmax = pr.groupby("r_tilde")["v"].transform("max")
