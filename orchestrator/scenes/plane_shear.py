@@ -204,7 +204,7 @@ def derive(case, common: dict) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------
-def pack_box(radii, L: float, z_lo: float, z_hi: float, rng, max_tries: int = 500) -> np.ndarray:
+def pack_box(radii, L: float, z_lo: float, z_hi: float, rng, max_tries: int = 2000) -> np.ndarray:
     """Random sequential addition of spheres (largest first) in [0, L)² (periodic) × [z_lo, z_hi]
     (centres at least a radius from both z faces), no overlaps. Returns positions in input order."""
     radii = np.asarray(radii, float)
