@@ -229,7 +229,14 @@ class Case(Strict):
         return d
 
     def hash_input(self) -> str:
-        return json.dumps(self.resolved(), sort_keys=True)
+        """What determines the engine run: the resolved case without its analyses and without
+        launch settings that do not change the result (progress bar, wall-clock limit)."""
+        d = self.resolved()
+        d.pop("analysis", None)
+        d.pop("description", None)
+        d.get("engine_options", {}).pop("progress", None)
+        d.get("engine_options", {}).pop("timeout", None)
+        return json.dumps(d, sort_keys=True)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -124,6 +124,13 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, derive(case))}"
     old = read_summary(run_dir)
     if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
+        if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
+            with _RunLock(run_dir):               # the run is reused; its analyses are (re)done
+                t0 = time.perf_counter()
+                old["analysis"] = run_case_analyses(case, run_dir)
+                old["analysis_specs"] = case.analysis
+                old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
+                write_json(run_dir / "summary.json", old)
         return RunOutcome(run_dir, "complete", old, reused=True)
     if old and old.get("status") == "unstable" and not force and not dry_run:
         return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
@@ -219,6 +226,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     if analyze and case.analysis:
         t3 = time.perf_counter()
         summary["analysis"] = run_case_analyses(case, run_dir)
+        summary["analysis_specs"] = case.analysis
         timings["analysis"] = time.perf_counter() - t3
     timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop"))
     summary["wall_time"] = timings

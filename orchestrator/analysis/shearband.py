@@ -16,6 +16,8 @@ replaces the finite difference.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 from scipy import optimize, special
@@ -55,8 +57,10 @@ def fit_erf_profile(z, v, sigma=None) -> dict:
     z0 = float(zs[np.argmin(np.abs(vs - 0.5))])
     w0 = max(span / 10, 1e-12)
     try:
-        p, cov = optimize.curve_fit(erf_profile, z, v, p0=[z0, w0], sigma=sigma,
-                                    absolute_sigma=sigma is not None, maxfev=20000)
+        with warnings.catch_warnings():      # an undetermined fit is reported by `ok`, not a warning
+            warnings.simplefilter("ignore", optimize.OptimizeWarning)
+            p, cov = optimize.curve_fit(erf_profile, z, v, p0=[z0, w0], sigma=sigma,
+                                        absolute_sigma=sigma is not None, maxfev=20000)
     except (RuntimeError, ValueError):
         return bad
     res = (v - erf_profile(z, *p)) / (sigma if sigma is not None else 1.0)
