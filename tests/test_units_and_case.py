@@ -130,3 +130,14 @@ def test_every_shipped_case_validates():
     assert cases
     for p in cases:
         load_case(p)
+
+
+def test_particles_larger_than_their_container_are_refused(tmp_path):
+    from pathlib import Path
+    smoke = Path(__file__).parents[1] / "cases" / "shear_cell_smoke.yaml"
+    case = tmp_path / "big.yaml"
+    case.write_text(f"extends: {smoke}\nscene: {{psd: {{d_max: 5 mm}}}}\n")
+    with pytest.raises(CaseError) as exc:
+        load_case(case)
+    msg = str(exc.value)
+    assert str(case) in msg and "scene" in msg and "particles larger than their container" in msg

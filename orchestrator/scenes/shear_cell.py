@@ -116,6 +116,10 @@ class Scene(Strict):
 
     @model_validator(mode="after")
     def _check(self):
+        if self.psd.d_max >= self.cell_diameter or self.psd.d_max >= self.fill_height:
+            raise ValueError(f"particles larger than their container: d_max = {self.psd.d_max:g} m against a cell "
+                             f"{self.cell_diameter:g} m wide and a fill {self.fill_height:g} m high; make d_max "
+                             "smaller (the seed: 50 um in a 1.78 mm cell) or the cell larger")
         if self.gap >= self.cell_diameter / 2:
             raise ValueError("gap must be smaller than the cell radius")
         if self.gap < self.psd.d_max:
