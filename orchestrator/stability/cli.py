@@ -1,0 +1,175 @@
+"""Command group of orchestrator.stability: ``stability``, ``convergence``, ``sweep``, ``calibrate``
+(registered by orchestrator.cli through ``add_parsers``)."""
+from __future__ import annotations
+
+import glob
+import json
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+#: the members of cases/stability/ small enough for CI (soft grains, ~100 grains, seconds per probe)
+CI_SUITE = ("mu0", "mu1", "very_soft", "fast_shear", "restitution_overdamped")
+
+
+def _console():
+    from rich.console import Console
+    return Console()
+
+
+def _print_df(df, title, floatfmt="{:.4g}"):
+    from rich.table import Table
+    t = Table(title=title)
+    for c in df.columns:
+        t.add_column(str(c))
+    for _, r in df.iterrows():
+        t.add_row(*[floatfmt.format(v) if isinstance(v, float) else str(v) for v in r.to_list()])
+    _console().print(t)
+
+
+def _suite(which: str) -> list[str]:
+    files = sorted(glob.glob(str(REPO / "cases" / "stability" / "[!_]*.yaml")))
+    if which == "ci":
+        files = [f for f in files if Path(f).stem in CI_SUITE]
+    return files
+
+
+def cmd_stability(args) -> int:
+    from .bisection import bisect, table
+    from ..case import load_case
+    from ..derive import derive
+    cases = list(args.case) + (_suite(args.suite) if args.suite else [])
+    if not cases:
+        print("give a CASE or --suite ci|all")
+        return 2
+    con = _console()
+    results = []
+    for c in cases:
+        case = load_case(c)
+        rep = derive(case)["stability"]
+        con.print(f"[bold]{case.name}[/bold]: dt = {rep['dt']:.3e} s; limits: "
+                  + ", ".join(f"{k} {v:.3e} s ({rep['fractions'][k]:.3g})" for k, v in rep["limits"].items()))
+        for eng in ([args.engine] if args.engine != "all" else case.engines):
+            b = bisect(c, eng, runs_root=args.runs, rel_tol=args.tol, log=con.print)
+            results.append(b)
+    df = table(results)
+    _print_df(df, "Largest stable dt (fraction of derive's critical step) against the pre-run check")
+    if args.csv:
+        from ..atomic import write_text
+        write_text(args.csv, df.to_csv(index=False))
+    bad = df[df["check_safe_side"] != True]  # noqa: E712
+    if len(bad):
+        con.print(f"[red]the pre-run check is NOT on the safe side for {len(bad)} case/engine pair(s)[/red]")
+        return 1
+    con.print("[green]the pre-run check stays on the safe side everywhere[/green]")
+    return 0
+
+
+def cmd_convergence(args) -> int:
+    from .convergence import ladder
+    out = ladder(args.case, args.knob, [_val(v) for v in args.values],
+                 engines=None if args.engine == "all" else [args.engine], runs_root=args.runs,
+                 reference=args.reference, target_error=args.target_error, scheduler=args.scheduler,
+                 workers=args.workers, plot=args.plot or Path(args.runs) / "convergence" /
+                 f"{Path(args.case).stem}-{args.knob}.png")
+    df = out["table"]
+    cols = [c for c in df.columns if not c.startswith("err_") or c in ("err_mu_macro",)]
+    _print_df(df[cols], f"Error against run time: {args.case}, knob {args.knob}")
+    con = _console()
+    for eng, r in out["recommendation"].items():
+        con.print(f"[green]{eng}[/green]: recommended {args.knob} = {r[args.knob]} (error {r['error']:.3g}, "
+                  f"engine time {r['engine_time_s']:.3g} s{', ' + r['note'] if 'note' in r else ''}); "
+                  f"Pareto front: {r['pareto']}")
+    con.print(f"plot: {out['plot']}")
+    return 0
+
+
+def _val(v: str):
+    import yaml
+    return yaml.safe_load(v)
+
+
+def cmd_sweep(args) -> int:
+    from .sweep import sweep
+    con = _console()
+
+    def show(task, res):
+        con.print(f"  {task['engine']} {task['point']} -> {res.get('status')}"
+                  f"{' (reused)' if res.get('reused') else ''} {res.get('error') or ''}")
+    df = sweep(args.case, args.set, grid=args.grid, engines=None if args.engine == "all" else [args.engine],
+               runs_root=args.runs, scheduler=args.scheduler, workers=args.workers, on_result=show, force=args.force)
+    _print_df(df.drop(columns=["run_id"]), f"sweep of {args.case}")
+    failed = df[df["status"] == "failed"]
+    return 1 if len(failed) else 0
+
+
+def cmd_calibrate(args) -> int:
+    from .calibration import calibrate
+    mus = [float(x) for x in args.mu.split(",")]
+    out = calibrate(args.case, mus, target=args.target, engines=None if args.engine == "all" else [args.engine],
+                    runs_root=args.runs, scheduler=args.scheduler, workers=args.workers,
+                    plot=args.plot or Path(args.runs) / "calibration" / f"{Path(args.case).stem}.png")
+    df = out["table"]
+    keep = [c for c in ("contact.friction", "engine", "status", "mu_macro", "mu_macro_sem", "solid_fraction",
+                        "engine_time_s") if c in df.columns]
+    _print_df(df[keep], f"mu_macro(mu), {args.case}")
+    con = _console()
+    for eng, f in out["fits"].items():
+        if "error" in f:
+            con.print(f"[red]{eng}: {f['error']}[/red]")
+            continue
+        con.print(f"{eng}: mu_macro = {f['mu0']:.4f} + {f['A']:.4f} (1 - exp(-mu/{f['mu_c']:.4f})), "
+                  f"rms residual {f['rms_residual']:.3g}")
+        if args.target is not None:
+            r = out["mu_for_target"].get(eng, {})
+            con.print(f"  mu for mu_macro = {args.target}: " + (f"{r['mu']:.4f} ± {r['mu_std']:.2g}" if "mu" in r
+                                                                else r.get("error", "?")))
+    con.print(f"plot: {out['plot']}")
+    return 0
+
+
+def add_parsers(sub):
+    s = sub.add_parser("stability", help="largest stable dt per case and engine (bisection) vs the pre-run check")
+    s.add_argument("case", nargs="*", help="case YAML file(s)")
+    s.add_argument("--suite", choices=["ci", "all"], help="the cases/stability/ suite (ci: its small members)")
+    s.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    s.add_argument("--runs", default="runs/stability")
+    s.add_argument("--tol", type=float, default=0.15, help="relative bisection tolerance")
+    s.add_argument("--csv", help="also write the table as CSV")
+    s.set_defaults(func=cmd_stability)
+
+    c = sub.add_parser("convergence", help="error against run time over a ladder of one knob")
+    c.add_argument("case")
+    c.add_argument("--knob", required=True, help="dt_fraction, stiffness_scale, rate_scale, particle_scale, count, "
+                                                 "or a dotted case field")
+    c.add_argument("--values", nargs="+", required=True, help="ladder values, cheapest first (the last is the "
+                                                              "reference unless --reference)")
+    c.add_argument("--reference", help="the value to compare against (default: the last)")
+    c.add_argument("--target-error", type=float, default=0.05)
+    c.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    c.add_argument("--runs", default="runs")
+    c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
+    c.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: clean timings)")
+    c.add_argument("--plot", help="plot file (default RUNS/convergence/CASE-KNOB.png)")
+    c.set_defaults(func=cmd_convergence)
+
+    w = sub.add_parser("sweep", help="run a case over field values (list or --grid), reusing finished runs")
+    w.add_argument("case")
+    w.add_argument("--set", action="append", required=True, help="FIELD=V1,V2,... (dotted field, repeatable)")
+    w.add_argument("--grid", action="store_true", help="Cartesian product of the --set lists (default: zip)")
+    w.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    w.add_argument("--runs", default="runs")
+    w.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (default: local processes)")
+    w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    w.add_argument("--force", action="store_true", help="re-run finished runs too")
+    w.set_defaults(func=cmd_sweep)
+
+    k = sub.add_parser("calibrate", help="mu calibration in plane shear (seed 000 §3.2)")
+    k.add_argument("case", help="a plane_shear case")
+    k.add_argument("--mu", required=True, help="friction coefficients, e.g. 0.1,0.3,0.6,1.0")
+    k.add_argument("--target", type=float, help="target steady mu_macro")
+    k.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    k.add_argument("--runs", default="runs")
+    k.add_argument("--scheduler")
+    k.add_argument("--workers", type=int)
+    k.add_argument("--plot")
+    k.set_defaults(func=cmd_calibrate)

@@ -1,0 +1,194 @@
+"""Error against run time: ``orchestrator convergence CASE --knob KNOB --values ...``.
+
+A ladder of runs over one knob (through the sweep machinery, so finished runs are reused and
+the ladder can run on a Dask cluster). The reference is the finest run (the last value given,
+for every knob here ordered from cheap to expensive) unless ``reference`` names a value. For each
+run: the engine wall time and the relative error of every key observable of the case
+(:mod:`.observables`: μ_macro, shear-band position and width, density profile, solid fraction …;
+profiles by their relative L2 norm). The error of a run is the largest of its observables'
+errors. Output: a table, a log-log plot of error against wall time with the Pareto front (runs
+no other run beats in both), and the cheapest setting whose error is below ``target_error``.
+
+Knobs (``--knob``): ``dt_fraction`` (timestep.fraction), ``stiffness_scale`` (Young's modulus ×,
+walls too when they are a material), ``rate_scale`` (the scene's inertial/quasi-static numbers ×),
+``particle_scale`` (PSD diameters ×, keeping the count), ``count`` (scene.n_particles), or any
+dotted case field (``scene.width``).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count")
+_RATE_FIELDS = ("inertial_number", "compression_inertial_number", "quasi_static_number")
+
+
+def knob_overrides(case_path, knob: str, value) -> dict:
+    """The nested overrides that set ``knob`` to ``value`` on the case at ``case_path``."""
+    from ..case import load_case
+    from .sweep import nested
+    if knob == "dt_fraction":
+        return {"timestep": {"fraction": float(value)}}
+    base = load_case(case_path)
+    if knob == "stiffness_scale":
+        out = {"material": {"youngs_modulus": f"{base.material.youngs_modulus * float(value)!r} Pa"}}
+        if hasattr(base.wall, "youngs_modulus"):
+            out["wall"] = {"youngs_modulus": f"{base.wall.youngs_modulus * float(value)!r} Pa"}
+        return out
+    if knob == "rate_scale":
+        sc = {f: getattr(base.scene, f) * float(value) for f in _RATE_FIELDS if hasattr(base.scene, f)}
+        return {"scene": sc}
+    if knob == "particle_scale":
+        p = base.scene.psd
+        return {"scene": {"psd": {k: f"{getattr(p, k) * float(value)!r} m" for k in ("median", "d_min", "d_max")}}}
+    if knob == "count":
+        return {"scene": {"n_particles": int(value)}}
+    return nested({knob: value})
+
+
+def relative_error(value, ref) -> float:
+    if isinstance(ref, list) or isinstance(value, list):
+        a, b = np.asarray(value, float), np.asarray(ref, float)
+        if a.shape != b.shape:
+            return float("nan")
+        n = np.linalg.norm(b)
+        return float(np.linalg.norm(a - b) / n) if n > 0 else float("nan")
+    if value is None or ref is None:
+        return float("nan")
+    if not np.isfinite(ref) or ref == 0:
+        return abs(value - ref) if np.isfinite(ref) else float("nan")
+    return abs(value - ref) / abs(ref)
+
+
+def pareto(times, errors) -> list[int]:
+    """Indices of the runs no other run beats in both wall time and error (sorted by time)."""
+    idx = [k for k in np.argsort(times) if np.isfinite(errors[k]) and np.isfinite(times[k])]
+    front, best = [], math.inf
+    for k in idx:
+        if errors[k] < best:
+            front.append(int(k))
+            best = errors[k]
+    return front
+
+
+def ladder(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
+           reference=None, target_error: float = 0.05, scheduler=None, workers: int | None = 1,
+           observables_used: list[str] | None = None, plot: str | Path | None = None) -> dict:
+    """Run the ladder and compare; returns {"table": DataFrame, "recommendation": {...}, "plot": path}."""
+    import pandas as pd
+    from ..case import load_case
+    from .executor import get_executor, run_task
+    from .sweep import _finished, plan
+    case0 = load_case(case_path)
+    engines = engines or case0.engines
+    rows = []
+    ex = get_executor(scheduler, workers)
+    try:
+        for eng in engines:
+            tasks = []
+            for v in values:
+                ov = knob_overrides(case_path, knob, v)
+                t = plan(case_path, [{}], [eng], runs_root)[0] if False else None
+                from ..runner import run_dir_for
+                c = load_case(case_path, overrides=ov)
+                rd = run_dir_for(c, eng, runs_root)
+                tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
+                              "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name})
+            results = [None] * len(tasks)
+            todo = []
+            for k, t in enumerate(tasks):
+                from ..runner import read_summary
+                s = read_summary(t["run_dir"]) or {}
+                if (s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()) \
+                        or s.get("status") == "unstable":
+                    results[k] = _finished(t)
+                else:
+                    todo.append(k)
+            for j, res in ex.run(run_task, [tasks[k] for k in todo]):
+                results[todo[j]] = res
+            ref_k = len(values) - 1 if reference is None else [str(v) for v in values].index(str(reference))
+            ref_obs = (results[ref_k] or {}).get("observables") or {}
+            keys = [k for k, v in ref_obs.items() if not k.endswith(("_sem", "_std", "_error"))
+                    and (observables_used is None or k in observables_used)]
+            for k, (t, r) in enumerate(zip(tasks, results)):
+                obs = r.get("observables") or {}
+                row = {"engine": eng, knob: values[k], "status": r.get("status"),
+                       "engine_time_s": r.get("engine_time"), "total_time_s": r.get("total_time"),
+                       "reference": k == ref_k, "run_id": t["run_id"]}
+                errs = []
+                for key in keys:
+                    v = obs.get(key)
+                    if not isinstance(v, list):
+                        row[key] = v
+                    e = relative_error(v, ref_obs[key]) if v is not None else float("nan")
+                    row[f"err_{key}"] = e
+                    if np.isfinite(e):
+                        errs.append(e)
+                row["error"] = max(errs) if errs and r.get("status") == "complete" else float("nan")
+                rows.append(row)
+    finally:
+        ex.close()
+    df = pd.DataFrame(rows)
+    rec = recommend(df, knob, target_error)
+    out = {"table": df, "recommendation": rec}
+    if plot:
+        out["plot"] = plot_ladder(df, knob, plot, target_error)
+    return out
+
+
+def recommend(df, knob: str, target_error: float) -> dict:
+    """Per engine: the cheapest (engine time) non-reference run with error ≤ target (else the
+    reference) and its Pareto front."""
+    out = {}
+    for eng, g in df.groupby("engine"):
+        g = g.reset_index(drop=True)
+        t = g["engine_time_s"].astype(float).to_numpy()
+        e = g["error"].astype(float).to_numpy()
+        e_plot = np.where(g["reference"], 0.0, e)
+        front = pareto(t, e_plot)
+        ok = g[(~g["reference"]) & (g["error"] <= target_error)]
+        if len(ok):
+            best = ok.loc[ok["engine_time_s"].astype(float).idxmin()]
+            out[eng] = {knob: best[knob], "error": float(best["error"]), "engine_time_s": float(best["engine_time_s"]),
+                        "speed_up_vs_reference": float(g.loc[g["reference"], "engine_time_s"].iloc[0] / best["engine_time_s"]),
+                        "pareto": [g.loc[k, knob] for k in front]}
+        else:
+            ref = g[g["reference"]].iloc[0]
+            out[eng] = {knob: ref[knob], "error": 0.0, "engine_time_s": float(ref["engine_time_s"]),
+                        "note": f"no cheaper setting within {target_error:g}: keep the reference",
+                        "pareto": [g.loc[k, knob] for k in front]}
+    return out
+
+
+def plot_ladder(df, knob: str, path, target_error: float):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    floor = None
+    for eng, g in df.groupby("engine"):
+        g = g[~g["reference"]]
+        if not len(g):
+            continue
+        t = g["engine_time_s"].astype(float).to_numpy()
+        e = g["error"].astype(float).to_numpy()
+        ok = np.isfinite(e) & (e > 0)
+        ax.loglog(t[ok], e[ok], "o", label=eng)
+        for tt, ee, v in zip(t[ok], e[ok], g[knob].to_numpy()[ok]):
+            ax.annotate(f"{v}", (tt, ee), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        front = pareto(t, np.where(ok, e, np.nan))
+        if front:
+            ax.loglog(t[front], e[front], "-", alpha=0.6, label=f"{eng} Pareto front")
+    ax.axhline(target_error, ls="--", color="grey", label=f"target {target_error:g}")
+    ax.set_xlabel("engine wall time [s]")
+    ax.set_ylabel("largest relative error of the key observables [-]")
+    ax.set_title(f"error against run time, knob {knob} (reference = finest)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

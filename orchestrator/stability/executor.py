@@ -1,0 +1,138 @@
+"""One executor interface for many runs: local processes by default (one run per core), a Dask
+distributed cluster when a scheduler address (or a Client/cluster) is given. dask-jobqueue's
+SLURMCluster/PBSCluster are Dask clusters too: pass ``cluster.scheduler_address``.
+
+``Executor.run(tasks)`` yields ``(index, result)`` as tasks finish. A task that raises never takes
+the others down: its result is ``{"status": "failed", "error": ...}`` (see :func:`run_task`).
+"""
+from __future__ import annotations
+
+import os
+import traceback
+from abc import ABC, abstractmethod
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Callable, Iterable, Iterator
+
+
+def run_task(task: dict) -> dict:
+    """Run one case on one engine (picklable, top level: runs in a worker process or on a Dask
+    worker). ``task``: ``case`` (path), ``overrides`` (nested dict), ``engine``, ``runs_root``,
+    optional ``force``. Returns the run's status, directory, wall time and observables; never
+    raises."""
+    import time
+    t0 = time.perf_counter()
+    try:
+        from ..case import load_case
+        from ..runner import run_case
+        from .observables import observables
+        case = load_case(task["case"], overrides=task.get("overrides") or None)
+        out = run_case(case, task["engine"], runs_root=task["runs_root"], force=task.get("force", False),
+                       progress=False, analyze=task.get("analyze", False))
+        res = {"status": out.status, "run_dir": str(out.run_dir), "reused": out.reused,
+               "engine_time": out.summary.get("wall_time", {}).get("engine"),
+               "total_time": out.summary.get("wall_time", {}).get("total"),
+               "unstable": out.summary.get("unstable"), "dt": out.summary.get("dt"),
+               "dt_fraction": out.summary.get("dt_fraction")}
+        if out.status == "complete":
+            try:
+                res["observables"] = observables(case, out.run_dir)
+            except Exception as exc:                         # a run is not lost for a failed measure
+                res["observables_error"] = f"{type(exc).__name__}: {exc}"
+        return res
+    except Exception as exc:
+        return {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc(limit=5), "total_time": time.perf_counter() - t0}
+
+
+class Executor(ABC):
+    """Runs independent tasks; yields (index, result) in completion order."""
+    workers: int = 1
+
+    @abstractmethod
+    def run(self, fn: Callable, tasks: list) -> Iterator[tuple[int, object]]:
+        ...
+
+    def close(self):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class SerialExecutor(Executor):
+    """In this process, one task after the other (debugging, and 1-worker baselines)."""
+    workers = 1
+
+    def run(self, fn, tasks):
+        for k, t in enumerate(tasks):
+            yield k, fn(t)
+
+
+class LocalExecutor(Executor):
+    """A pool of local processes, one task per core by default."""
+
+    def __init__(self, workers: int | None = None):
+        self.workers = workers or os.cpu_count() or 1
+        self.pool = None
+
+    def run(self, fn, tasks):
+        if self.workers == 1:
+            yield from SerialExecutor().run(fn, tasks)
+            return
+        import multiprocessing as mp
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
+        futs = {self.pool.submit(fn, t): k for k, t in enumerate(tasks)}
+        for f in as_completed(futs):
+            k = futs[f]
+            try:
+                yield k, f.result()
+            except Exception as exc:                      # the worker itself died
+                yield k, {"status": "failed", "error": f"worker: {type(exc).__name__}: {exc}"}
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pool = None
+
+
+class DaskExecutor(Executor):
+    """A dask.distributed cluster: ``address`` ("tcp://host:8786"), a ``Client`` or a cluster
+    object (LocalCluster, dask-jobqueue's SLURMCluster/PBSCluster)."""
+
+    def __init__(self, address=None, client=None):
+        from distributed import Client
+        self._own = client is None
+        if client is None:
+            client = Client(address) if isinstance(address, str) else Client(address)
+        self.client = client
+        info = client.scheduler_info()
+        self.workers = max(1, sum(w.get("nthreads", 1) for w in info.get("workers", {}).values()))
+
+    def run(self, fn, tasks):
+        from distributed import as_completed as das_completed
+        futs = [self.client.submit(fn, t, pure=False, key=f"orch-{k}-{os.getpid()}-{id(tasks)}")
+                for k, t in enumerate(tasks)]
+        index = {f.key: k for k, f in enumerate(futs)}
+        for f in das_completed(futs):
+            k = index[f.key]
+            try:
+                yield k, f.result()
+            except Exception as exc:
+                yield k, {"status": "failed", "error": f"dask: {type(exc).__name__}: {exc}"}
+
+    def close(self):
+        if self._own:
+            self.client.close()
+
+
+def get_executor(scheduler=None, workers: int | None = None) -> Executor:
+    """Dask when ``scheduler`` (address, Client or cluster) is given, else local processes."""
+    if scheduler is None:
+        return LocalExecutor(workers)
+    from distributed import Client
+    if isinstance(scheduler, Client):
+        return DaskExecutor(client=scheduler)
+    return DaskExecutor(address=scheduler)

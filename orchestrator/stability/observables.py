@@ -1,0 +1,74 @@
+"""The key observables of a run, per scene, for sweeps, convergence ladders and calibration.
+
+- ``plane_shear``: steady-state μ_macro = |F_x|/|F_z| on the top wall (and its standard error),
+  sample height and solid fraction in the steady state;
+- ``shear_cell``: steady μ_macro (3T/(2RF) over the last half of the shear), shear-band position
+  and width in the last frame (erf fit), the axial density profile of the last frame;
+- ``impact``: rebound speeds of every sphere.
+Every observable is a float or a list of floats (profiles), SI units.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def observables(case, run_dir) -> dict:
+    from ..frames import Frames
+    run_dir = Path(run_dir)
+    fr = Frames(run_dir / "frames.h5")
+    params = json.loads((run_dir / "params.json").read_text())
+    kind = case.scene.kind
+    if kind == "plane_shear":
+        return _plane_shear(case, fr, params)
+    if kind == "shear_cell":
+        return _shear_cell(case, fr, params)
+    if kind == "impact":
+        v = fr.velocity[-1]
+        return {"rebound_speed": [float(x) for x in np.linalg.norm(v, axis=1)]}
+    return {}
+
+
+def _plane_shear(case, fr, params) -> dict:
+    from ..scenes.plane_shear import mu_macro_series, steady_mu
+    st = steady_mu(fr, params)
+    df = mu_macro_series(fr)
+    sc = params["scene"]
+    sel = df[df.strain >= sc["steady_from_strain"]]
+    g = sc["geometry"]
+    H = float(sel["z_top"].mean() - g["z_bottom"] - g["d_wall"]) if len(sel) else float("nan")
+    r = fr.radius[: sc["n_mobile"]]
+    phi = float(np.sum(4 / 3 * np.pi * r ** 3) / (g["L"] ** 2 * H)) if H > 0 else float("nan")
+    return {"mu_macro": st["mu"], "mu_macro_sem": st["sem"], "mu_macro_std": st["std"], "height": H,
+            "solid_fraction": phi, "normal_stress_error": st.get("normal_stress_rel_error", float("nan"))}
+
+
+def _shear_cell(case, fr, params) -> dict:
+    from ..analysis.friction import analyze_friction
+    out = {}
+    sc = params["scene"]
+    R = sc["geometry"]["R_piston"]
+    try:
+        res = analyze_friction(fr, radius=R, torque_wall="rotating", force_wall="lower_piston",
+                               steady_from=0.5 * case.scene.final_angle, steady_control="angle")
+        out["mu_macro"] = float(res.scalars["mu_mean"])
+    except Exception as exc:
+        out["mu_macro_error"] = str(exc)
+    try:
+        from ..analysis.shearband import analyze_shearband
+        res = analyze_shearband(fr)
+        out["shearband_z"] = float(res.scalars.get("z_sb_last", float("nan")))
+        out["shearband_width"] = float(res.scalars.get("w_sb_last", float("nan")))
+    except Exception as exc:
+        out["shearband_error"] = str(exc)
+    # axial number-density profile of the last frame (10 bins between the plate faces)
+    p = fr.position[-1]
+    ok = ~np.isnan(p).any(1)
+    z = p[ok, 2]
+    edges = np.linspace(0.0, sc["geometry"]["z_upper_face"], 11)      # fixed bins: comparable across runs
+    h, _ = np.histogram(z, edges)
+    out["density_profile"] = [float(x) for x in h / max(1, ok.sum())]
+    return out

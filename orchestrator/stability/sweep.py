@@ -1,0 +1,159 @@
+"""Sweeps over any case field: ``orchestrator sweep CASE --set field=v1,v2 ... [--grid]``.
+
+Each point is the case with nested overrides (``contact.friction=0.3,0.5`` sets
+``contact: {friction: ...}``; values are read as YAML, so ``5 MPa`` stays a quantity and ``0.3``
+a number). Without ``--grid`` the lists are zipped (equal lengths); with it, their Cartesian
+product is taken. Every run's id is the runner's hash of the resolved case, derived numbers,
+engine version and templates: a finished run (complete or stopped as unstable) is reused, so a
+re-run submits only what is missing (failed or never run). Results are written after every
+finished run to ``<runs>/<case>/sweep-<id>.json`` (and ``.csv``), so a failure or an interrupt
+never loses the other runs' results.
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import time
+from pathlib import Path
+
+import yaml
+
+
+def parse_sets(sets: list[str]) -> dict[str, list]:
+    out = {}
+    for s in sets:
+        if "=" not in s:
+            raise ValueError(f"--set {s!r}: write FIELD=V1,V2,... (e.g. contact.friction=0.3,0.5)")
+        field, vals = s.split("=", 1)
+        out[field.strip()] = [yaml.safe_load(v.strip()) for v in vals.split(",") if v.strip() != ""]
+        if not out[field.strip()]:
+            raise ValueError(f"--set {s!r}: no values")
+    return out
+
+
+def points(sets: dict[str, list], grid: bool = False) -> list[dict]:
+    keys = list(sets)
+    if grid:
+        return [dict(zip(keys, combo)) for combo in itertools.product(*(sets[k] for k in keys))]
+    n = {len(v) for v in sets.values()}
+    if len(n) > 1:
+        raise ValueError(f"--set lists have different lengths {sorted(n)}; give --grid for their product")
+    return [dict(zip(keys, combo)) for combo in zip(*(sets[k] for k in keys))]
+
+
+def nested(point: dict) -> dict:
+    """{"contact.friction": 0.3} -> {"contact": {"friction": 0.3}}."""
+    out: dict = {}
+    for dotted, v in point.items():
+        d = out
+        parts = dotted.split(".")
+        for p in parts[:-1]:
+            d = d.setdefault(p, {})
+        d[parts[-1]] = v
+    return out
+
+
+def plan(case_path, pts: list[dict], engines: list[str], runs_root) -> list[dict]:
+    """Tasks with their run directory (hash) and whether a finished run already exists."""
+    from ..case import load_case
+    from ..runner import read_summary, run_dir_for
+    tasks = []
+    for pt in pts:
+        ov = nested(pt)
+        case = load_case(case_path, overrides=ov)
+        for eng in (engines or case.engines):
+            rd = run_dir_for(case, eng, runs_root)
+            s = read_summary(rd) or {}
+            done = (s.get("status") == "complete" and (rd / "frames.h5").exists()) or s.get("status") == "unstable"
+            tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
+                          "point": pt, "run_dir": str(rd), "run_id": rd.name, "done": done})
+    return tasks
+
+
+def _finished(task: dict) -> dict:
+    """The result of a run that is already there (no engine started)."""
+    from ..case import load_case
+    from ..runner import read_summary
+    from .observables import observables
+    s = read_summary(task["run_dir"])
+    res = {"status": s["status"], "run_dir": task["run_dir"], "reused": True,
+           "engine_time": s.get("wall_time", {}).get("engine"), "total_time": s.get("wall_time", {}).get("total"),
+           "unstable": s.get("unstable"), "dt": s.get("dt"), "dt_fraction": s.get("dt_fraction")}
+    if s["status"] == "complete":
+        try:
+            res["observables"] = observables(load_case(task["case"], overrides=task["overrides"] or None),
+                                             task["run_dir"])
+        except Exception as exc:
+            res["observables_error"] = f"{type(exc).__name__}: {exc}"
+    return res
+
+
+def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engines: list[str] | None = None,
+          runs_root="runs", scheduler=None, workers: int | None = None, executor=None, on_result=None,
+          force: bool = False) -> "pd.DataFrame":
+    """Run (or reuse) every point on every engine; returns one row per run. ``scheduler``: a Dask
+    address, Client or cluster (else local processes, ``workers`` of them, default one per core).
+    ``force`` re-runs even finished runs."""
+    import pandas as pd
+    from .executor import get_executor, run_task
+    if isinstance(sets, list):
+        sets = parse_sets(sets)
+    pts = points(sets, grid)
+    tasks = plan(case_path, pts, engines, runs_root)
+    sid = hashlib.sha256(json.dumps([str(case_path), sets, grid, engines], sort_keys=True, default=str)
+                         .encode()).hexdigest()[:10]
+    from ..case import load_case
+    name = load_case(case_path).name
+    out_dir = Path(runs_root) / name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out_json = out_dir / f"sweep-{sid}.json"
+    results: list[dict | None] = [None] * len(tasks)
+    t0 = time.perf_counter()
+
+    def record(k, res):
+        results[k] = res
+        if on_result:
+            on_result(tasks[k], res)
+        _write(out_json, tasks, results, sets, grid, time.perf_counter() - t0)
+
+    todo = []
+    for k, t in enumerate(tasks):
+        if t["done"] and not force:
+            record(k, _finished(t))
+        else:
+            todo.append(k)
+    if todo:
+        ex = executor or get_executor(scheduler, workers)
+        try:
+            sub = [dict(tasks[k], force=force) for k in todo]
+            for j, res in ex.run(run_task, sub):
+                record(todo[j], res)
+        finally:
+            if executor is None:
+                ex.close()
+    _write(out_json, tasks, results, sets, grid, time.perf_counter() - t0)
+    return table(tasks, results)
+
+
+def table(tasks, results) -> "pd.DataFrame":
+    import pandas as pd
+    rows = []
+    for t, r in zip(tasks, results):
+        r = r or {"status": "missing"}
+        row = {**t["point"], "engine": t["engine"], "run_id": t["run_id"], "status": r.get("status"),
+               "reused": r.get("reused", False), "engine_time_s": r.get("engine_time"),
+               "error": r.get("error") or (r.get("unstable") or {}).get("figure")}
+        for k, v in (r.get("observables") or {}).items():
+            if not isinstance(v, list):
+                row[k] = v
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _write(path: Path, tasks, results, sets, grid, elapsed):
+    from ..atomic import write_json, write_text
+    data = {"sets": sets, "grid": grid, "elapsed_s": elapsed,
+            "runs": [{**{k: v for k, v in t.items() if k != "done"}, "result": r} for t, r in zip(tasks, results)]}
+    write_json(path, json.loads(json.dumps(data, default=str)))
+    write_text(path.with_suffix(".csv"), table(tasks, results).to_csv(index=False))
