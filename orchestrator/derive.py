@@ -118,12 +118,15 @@ def delivered_restitution(e_input: float) -> float:
     if beta == 0.0:
         return 1.0
     c = 2 * math.sqrt(5 / 6) * abs(beta) * math.sqrt(2 * 0.75)   # E* = 3/4, R* = m* = 1
+    return _clipped_restitution(lambda x, v: x ** 1.5 + c * x ** 0.25 * v)
 
-    def force(x, v):
-        return x ** 1.5 + c * x ** 0.25 * v if x > 0 else 0.0
 
+def _clipped_restitution(force) -> float:
+    """Restitution of a unit-mass contact m x'' = -max(force(x, x'), 0) entered at x' = 1: the
+    speed left when the clipped force vanishes while separating (or the overlap closes)."""
     def rhs(t, y):
-        return [y[1], -max(force(max(y[0], 0.0), y[1]), 0.0)]
+        x = max(y[0], 0.0)
+        return [y[1], -max(force(x, y[1]), 0.0) if x > 0 else 0.0]
 
     def zero_force(t, y):                 # the clipped force vanishes while separating
         return force(max(y[0], 1e-300), y[1]) if y[1] < 0 else 1.0
@@ -161,23 +164,7 @@ LIGGGHTS_MIN_RESTITUTION_INPUT = 0.05
 def _sqrt_damping_restitution(b: float) -> float:
     """e_n of X'' = -5/4 X^1.5 - b √X X' (Hertz with damping ∝ √δ δ̇, clipped; X = δ/δ_max
     of the elastic impact, τ = t v/δ_max)."""
-    def rhs(t, y):
-        x = max(y[0], 0.0)
-        f = 1.25 * x ** 1.5 + b * math.sqrt(x) * y[1]
-        return [y[1], -max(f, 0.0)]
-
-    def zero_force(t, y):
-        x = max(y[0], 1e-300)
-        return 1.25 * x ** 1.5 + b * math.sqrt(x) * y[1] if y[1] < 0 else 1.0
-    zero_force.terminal = True
-    zero_force.direction = -1
-
-    def left(t, y):
-        return y[0]
-    left.terminal = True
-    left.direction = -1
-    sol = solve_ivp(rhs, (0, 50), [1e-12, 1.0], events=[zero_force, left], rtol=1e-10, atol=1e-13, max_step=0.01)
-    return float(-sol.y[1, -1])
+    return _clipped_restitution(lambda x, v: 1.25 * x ** 1.5 + b * math.sqrt(x) * v)
 
 
 def sqrt_damping_gamma(e_target: float, m_eff: float, R_eff: float, E_eff: float, v: float) -> float:

@@ -390,17 +390,7 @@ class Frames:
         with h5py.File(self.path, "r") as h:
             if str(k) not in h["contacts"]:
                 raise KeyError(f"{self.path}: frame {k} has no contacts; frames with contacts: {self.contact_frames}")
-            g = h["contacts"][str(k)]
-            cols = {}
-            for key in CONTACT_FIELDS:
-                if key in g:
-                    a = g[key][()]
-                    if a.ndim == 1:
-                        cols[key] = a
-                    else:
-                        for c, ax in enumerate("xyz"):
-                            cols[f"{key}_{ax}"] = a[:, c]
-        return pd.DataFrame(cols)
+            return _group_table(h["contacts"][str(k)], CONTACT_FIELDS)
 
     def contact_arrays(self, k: int) -> dict:
         """Contacts of frame k as a dict of arrays (``i``, ``j``, ``point``, ``normal``, ``fn``, ``ft``)."""
@@ -411,18 +401,8 @@ class Frames:
 
     def wall(self, name: str):
         """Time series of one wall as a DataFrame (time, position_x, …, force_z, torque_z …)."""
-        import pandas as pd
         with h5py.File(self.path, "r") as h:
-            g = h["walls"][name]
-            cols = {}
-            for key in g:
-                a = g[key][()]
-                if a.ndim == 1:
-                    cols[key] = a
-                else:
-                    for c, ax in enumerate("xyz"):
-                        cols[f"{key}_{ax}"] = a[:, c]
-        return pd.DataFrame(cols)
+            return _group_table(h["walls"][name])
 
     @property
     def walls(self) -> dict:
@@ -436,6 +416,22 @@ class Frames:
 def load(path) -> Frames:
     """Open the frames of a run directory, a ``frames.h5`` file, or a CT frame set."""
     return Frames(path)
+
+
+def _group_table(g, keys=None):
+    """The datasets of an HDF5 group as a DataFrame; (M, 3) arrays become <name>_x/_y/_z columns."""
+    import pandas as pd
+    cols = {}
+    for key in (keys if keys is not None else list(g)):
+        if key not in g:
+            continue
+        a = g[key][()]
+        if a.ndim == 1:
+            cols[key] = a
+        else:
+            for c, ax in enumerate("xyz"):
+                cols[f"{key}_{ax}"] = a[:, c]
+    return pd.DataFrame(cols)
 
 
 def _maybe_json(v):
