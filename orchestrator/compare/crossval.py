@@ -87,6 +87,15 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
     else:
         for e in engines:
             runs[e], elapsed[e] = _run_one(case, e, runs_root, force)
+    bad = {e: o for e, o in runs.items() if o.status != "complete"}
+    if bad:
+        from engines.base import EngineError
+        msg = "; ".join(f"{e}: {o.status} ({o.run_dir})" + (
+            f" — {o.summary['unstable'].get('meaning', o.summary['unstable'].get('figure'))}: "
+            f"{o.summary['unstable'].get('value'):.4g} > {o.summary['unstable'].get('limit')} at step "
+            f"{o.summary['unstable'].get('step')}" if isinstance(o.summary.get("unstable"), dict) else "")
+            for e, o in bad.items())
+        raise EngineError(f"crossval {case.name}: not every engine completed the case, nothing to compare: {msg}")
     rows = []
     for e in engines:
         o: RunOutcome = runs[e]

@@ -140,6 +140,10 @@ def run_checks(run_dir, frames=None, summary: dict | None = None) -> pd.DataFram
         rows.append({"check": "steps run / steps planned", "value": f"{summary['steps_run']} / {summary['steps']}",
                      "limit": "equal", "status": "ok" if summary["steps_run"] >= summary["steps"] else "FAIL",
                      "source": "summary.json"})
+    if isinstance(summary.get("unstable"), dict):
+        u = summary["unstable"]
+        rows.append({"check": f"in-deck monitor: {u.get('meaning', u.get('figure'))}", "value": u.get("value"),
+                     "limit": u.get("limit"), "status": "FAIL", "source": f"summary.json (step {u.get('step')})"})
     stab = summary.get("stability") or summary.get("checks")
     if isinstance(stab, dict):
         for k, v in stab.items():
