@@ -109,7 +109,7 @@ def cmd_calibrate(args) -> int:
                     runs_root=args.runs, scheduler=args.scheduler, workers=args.workers,
                     plot=args.plot or Path(args.runs) / "calibration" / f"{Path(args.case).stem}.png")
     df = out["table"]
-    keep = [c for c in ("contact.friction", "engine", "status", "mu_macro", "mu_macro_sem", "solid_fraction",
+    keep = [c for c in ("contact.friction", "engine", "status", "mu_macro", "mu_macro_sem", "solid_fraction_nominal",
                         "engine_time_s") if c in df.columns]
     _print_df(df[keep], f"mu_macro(mu), {args.case}")
     con = _console()

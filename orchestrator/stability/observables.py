@@ -43,7 +43,7 @@ def _plane_shear(case, fr, params) -> dict:
     r = fr.radius[: sc["n_mobile"]]
     phi = float(np.sum(4 / 3 * np.pi * r ** 3) / (g["L"] ** 2 * H)) if H > 0 else float("nan")
     return {"mu_macro": st["mu"], "mu_macro_sem": st["sem"], "mu_macro_std": st["std"], "height": H,
-            "solid_fraction": phi, "normal_stress_error": st.get("normal_stress_rel_error", float("nan"))}
+            "solid_fraction_nominal": phi, "normal_stress_error": st.get("normal_stress_rel_error", float("nan"))}
 
 
 def _shear_cell(case, fr, params) -> dict:
