@@ -333,7 +333,8 @@ def mu_macro_series(frames) -> "pd.DataFrame":
     """μ_macro(strain) = |F_x|/|F_z| on the top wall, from a run's frames.h5."""
     import pandas as pd
     w = frames.wall("top")
-    mu = np.abs(w["force_x"].to_numpy()) / np.abs(w["force_z"].to_numpy())
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mu = np.abs(w["force_x"].to_numpy()) / np.abs(w["force_z"].to_numpy())
     return pd.DataFrame({"time": w["time"], "strain": w["strain"], "mu": mu, "normal_force": w["force_z"],
                          "shear_force": w["force_x"], "z_top": w["position_z"]})
 

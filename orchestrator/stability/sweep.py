@@ -59,9 +59,16 @@ def plan(case_path, pts: list[dict], engines: list[str], runs_root) -> list[dict
     from ..case import load_case
     from ..runner import read_summary, run_dir_for
     tasks = []
+    from ..case import CaseError
     for pt in pts:
         ov = nested(pt)
-        case = load_case(case_path, overrides=ov)
+        try:
+            case = load_case(case_path, overrides=ov)
+        except CaseError as exc:                 # an invalid point fails alone, the others still run
+            for eng in (engines or ["?"]):
+                tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
+                              "point": pt, "run_dir": None, "run_id": None, "done": False, "invalid": str(exc)})
+            continue
         for eng in (engines or case.engines):
             rd = run_dir_for(case, eng, runs_root)
             s = read_summary(rd) or {}
@@ -119,7 +126,9 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
 
     todo = []
     for k, t in enumerate(tasks):
-        if t["done"] and not force:
+        if t.get("invalid"):
+            record(k, {"status": "failed", "error": t["invalid"]})
+        elif t["done"] and not force:
             record(k, _finished(t))
         else:
             todo.append(k)

@@ -15,8 +15,9 @@ CASE = Path(__file__).resolve().parents[2] / "cases" / "stability" / "mu1.yaml"
 @pytest.mark.engine
 def test_sweep_on_local_cluster(tmp_path, engines_installed):
     from distributed import Client, LocalCluster
-    sets = {"contact.friction": [0.3, 0.6, 0.6],
-            # the third run cannot finish in 0.01 s: the engine is killed, the run fails
+    sets = {"contact.friction": [0.3, 0.6, 0.9],
+            # the third run cannot finish in 0.01 s: the engine is killed, the run fails (the timeout is
+            # not part of the run hash, so it gets its own friction to have its own run directory)
             "engine_options.timeout": ["300 s", "300 s", "0.01 s"]}
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             Client(cluster) as client:
