@@ -29,7 +29,8 @@ Lateral boundary:
   its envelope area; the sample bulges freely.
 
 Measured (time series every ``series_every`` steps, written by the engine into ``triax.txt``):
-σ₁ = (F_top + F_bottom)/2 / A with A = V/H; σ₃ = (radial force the lateral boundary exerts on the
+σ₁ = F_top / A with A = V/H (the loading piston's force, as in the laboratory; F_bottom is
+recorded too: in YADE the membrane, tied to the platens, carries a small part of the axial load); σ₃ = (radial force the lateral boundary exerts on the
 grains) / (lateral boundary area); ε_a = (H₀ - H)/H₀; ε_v = (V₀ - V)/V₀ (compression positive,
 stage-2 reference). The volume V is measured two independent ways:
 
@@ -54,7 +55,8 @@ from ..units import Length, Pressure
 
 #: per-frame controls written to frames.h5 (see module docstring)
 CONTROLS: tuple[str, ...] = ("stage", "axial_strain", "volumetric_strain", "volumetric_strain_hull",
-                             "sigma1", "sigma3", "stress_ratio", "volume_boundary", "volume_hull")
+                             "sigma1", "sigma3", "stress_ratio", "volume_boundary", "volume_hull",
+                             "sigma3_hull")
 
 #: columns of the engines' time-series file ``triax.txt`` (both engines write the same)
 SERIES_COLUMNS = ("step", "time", "stage", "z_bottom", "z_top", "f_bottom", "f_top", "f_lateral",
@@ -139,14 +141,15 @@ class Isotropic(Strict):
     """Stage 1: pressure ramp, axial servo, convergence test."""
     inertial_number: float = Field(1e-3, gt=0, le=0.1,
                                    description="sets the servo's largest platen speed v_max = I/(d√(ρ/p))·H")
-    gain: float = Field(1.0, gt=0, description="servo gain g in v = -v_max clip(g(1-σ_top/p), -1, 1)")
+    gain: float = Field(5.0, gt=0, description="servo gain g in v = -v_max clip(g(1-σ_top/p), -1, 1)")
     ramp_steps: int | None = Field(None, ge=0, description="steps over which p is ramped up (None: derived)")
     tolerance: float = Field(0.01, gt=0, lt=0.5, description="|σ/p - 1| to end the stage (chunk averages)")
     max_chunks: int = Field(60, ge=1)
     chunk_frames: int = Field(2, ge=1, description="frames per convergence chunk")
     drag: bool = Field(True, description="Stokes drag F = -6πνr v on the grains during stage 1 only, with ν "
-                                         "such that a grain pushed by p d50² drifts at I·√(p/ρ): "
-                                         "keeps the compaction of the loose packing quasi-static")
+                                         "such that a grain pushed by p d50² drifts at drag_inertial_number·√(p/ρ): "
+                                         "keeps the compaction of the loose packing from turning into a collapse")
+    drag_inertial_number: float = Field(0.05, gt=0, le=1)
 
 
 class Membrane(Strict):
@@ -159,12 +162,15 @@ class Membrane(Strict):
     node_radius: float = Field(0.15, gt=0, le=0.5, description="node (= half sheet thickness) radius / d50")
     contact_stiffness: float = Field(1.0, gt=0, description="grain-membrane kn as a multiple of the Hertz "
                                                               "tangent stiffness of a d50 grain on a flat wall at p")
-    update_every: int = Field(50, ge=1, description="steps between pressure-direction updates")
+    update_every: int = Field(5, ge=1, description="steps between updates of the nodal forces")
+    damping: float = Field(0.5, ge=0, description="membrane internal viscosity as a fraction of critical "
+                                                  "for a node on a grain contact (relative to its neighbours)")
 
 
 class Lateral(Strict):
     """LIGGGHTS substitute (shell_pressure): bands and shell definition."""
     bands: int | None = Field(None, ge=1, description="None: one band per ~3 d50 of height")
+    sectors: int = Field(8, ge=1, description="angular sectors per band (cells = bands x sectors)")
     shell_thickness: float = Field(0.5, gt=0, le=2, description="w / d50")
     update_every: int = Field(20, ge=1)
 
@@ -333,7 +339,7 @@ def derive(case, common: dict) -> dict:
     m_node = max(m.density * m.thickness * a_node, 2.0 * k_contact * (dt / 0.2) ** 2)
     total_iso = iso_chunk * s.isotropic.max_chunks
     # stage-1 drag (same law in both engines): terminal speed v_t = I_iso sqrt(p/rho) for F = p d50^2
-    v_t = s.isotropic.inertial_number * math.sqrt(p / rho)
+    v_t = s.isotropic.drag_inertial_number * math.sqrt(p / rho)
     nu = p * d50 / (3 * math.pi * v_t) if s.isotropic.drag else 0.0
     if nu > 0:
         r_min = common["r_min"]
@@ -353,12 +359,14 @@ def derive(case, common: dict) -> dict:
                 "drag_coefficient": 6 * math.pi * nu},
         "dump_every": dump_every, "series_every": series_every,
         "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
-        "restart_every": 10 ** 12,        # no restart files: a triaxial run restarts from scratch
+        "restart_every": 2_000_000_000,    # (int32) no restart files: a triaxial run restarts from scratch
         "platen_friction": s.platen_friction,
         "membrane": {"n_theta": n_theta, "n_z": n_z, "node_radius": r_node, "E_conn": E_conn,
                      "E_facet": E_facet, "k_contact": k_contact, "node_mass": m_node,
-                     "friction": m.friction, "update_every": m.update_every, "density": m.density},
-        "lateral": {"bands": bands, "shell": s.lateral.shell_thickness * d50,
+                     "friction": m.friction, "update_every": m.update_every, "density": m.density,
+                     # relative (membrane-internal) viscosity: critical for a node on a grain contact
+                     "damping": m.damping * 2 * math.sqrt(k_contact * m_node)},
+        "lateral": {"bands": bands, "sectors": s.lateral.sectors, "shell": s.lateral.shell_thickness * d50,
                     "update_every": s.lateral.update_every},
         "skin": 0.3 * d50,
         "series_columns": list(SERIES_COLUMNS),
@@ -510,7 +518,7 @@ def hull_volume(pos: np.ndarray, r: np.ndarray, z_bottom: float | None = None, z
     pos, r = pos[ok], r[ok]
     h0 = ConvexHull(pos)
     eq = h0.equations                                   # n·x + d <= 0 inside
-    depth = -(pos @ eq[:, :3].T + eq[:, 3]).min(axis=1)  # distance to the nearest hull plane
+    depth = np.min(-(pos @ eq[:, :3].T + eq[:, 3]), axis=1)  # distance to the nearest hull plane
     near = depth < 2 * r.max()
     pts = (pos[near, None, :] + r[near, None, None] * _sphere_dirs()[None]).reshape(-1, 3)
     if z_bottom is not None:
@@ -536,11 +544,11 @@ def analyse(series: dict, p: float) -> dict:
     s = series
     H = s["z_top"] - s["z_bottom"]
     A = s["volume"] / H
-    sigma1 = 0.5 * (s["f_top"] + s["f_bottom"]) / A
+    sigma1 = s["f_top"] / A             # the loading piston's force, as in the laboratory
     sigma3 = s["f_lateral"] / s["area_lateral"]
     shear = s["stage"] >= 2
     if shear.any():
-        k0 = int(np.argmax(shear))
+        k0 = max(0, int(np.argmax(shear)) - 1)       # the last stage-1 row: the state at the switch
         H0, V0 = H[k0], s["volume"][k0]
     else:
         k0, H0, V0 = len(H) - 1, H[-1], s["volume"][-1]
@@ -579,6 +587,10 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
         s3 = _window_mean(st, a["sigma3"], step, half)
         ctl["sigma1"].append(s1)
         ctl["sigma3"].append(s3)
+        # the same lateral force over the lateral area of the hull's equivalent cylinder
+        H = zt - zb
+        f_lat = _window_mean(st, s["f_lateral"], step, half)
+        ctl["sigma3_hull"].append(f_lat / (2 * np.pi * np.sqrt(vh / (np.pi * H)) * H))
         ctl["stress_ratio"].append(s1 / s3 if s3 else np.nan)
     # hull-based volumetric strain, referenced to the first shear frame (stage-2 start)
     vh = np.asarray(ctl["volume_hull"])
@@ -610,6 +622,11 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
             "sigma3_error_max_abs_smoothed": float(np.max(np.abs(e3s))), "smoothing_rows": w,
             "peak_stress_ratio": float(np.max(a["sigma1"][shear] / a["sigma3"][shear])),
         }
+        fs = controls["stage"] >= 2
+        if fs.any():
+            e3h = controls["sigma3_hull"][fs] / p - 1
+            summ["shear"]["sigma3_hull_error_max_abs"] = float(np.max(np.abs(e3h)))
+            summ["shear"]["sigma3_hull_error_mean"] = float(np.mean(e3h))
         vb, vhh = controls["volume_boundary"], controls["volume_hull"]
         summ["volume_methods"] = {
             "boundary_over_hull_max_dev": float(np.max(np.abs(vb / vhh - 1))),
@@ -631,15 +648,16 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
 
 
 def _frame_positions_liggghts(run_dir: Path):
-    from engines.liggghts import read_dump
+    from engines.liggghts import dump_segments, read_binary_dump
     from ..particles_io import read_particle_table
-    files = sorted((Path(run_dir) / "dump").glob("frame.*.txt"), key=lambda p: int(p.name.split(".")[1]))
+    cols = json.loads((Path(run_dir) / "dump" / "columns.json").read_text())
     ids = read_particle_table(Path(run_dir) / "particles.txt")["id"]
     row = {int(i): k for k, i in enumerate(ids)}
-    steps = np.array([int(f.name.split(".")[1]) for f in files])
+    frames = list(read_binary_dump(dump_segments(run_dir), len(cols)))
+    steps = np.array([s for s, _ in frames])
 
     def positions(k):
-        _, cols, a = read_dump(files[k])
+        a = frames[k][1]
         out = np.full((len(ids), 3), np.nan)
         rows = [row[int(i)] for i in a[:, cols.index("id")]]
         out[rows] = a[:, [cols.index(c) for c in ("x", "y", "z")]]
