@@ -350,6 +350,8 @@ def write_compare_report(cmp, path, crossval: dict | None = None) -> Path:
         if o.overlay is not None:
             figs.append(_img(fig_to_data_uri(o.overlay), f"{name}: A and B overlaid"))
         for lab, res in ((A.label, o.result_a), (B.label, o.result_b)):
+            if res is None:                 # e.g. 'macro': series compared directly, overlay only
+                continue
             try:
                 figs.append(_img(fig_to_data_uri(res.plot()), f"{name}: {lab}"))
             except Exception as exc:  # noqa: BLE001 - a plot that cannot be drawn is reported, not fatal

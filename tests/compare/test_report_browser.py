@@ -1,0 +1,70 @@
+"""The HTML reports open in a real headless Chromium: screenshot, no console errors, no network."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from orchestrator.compare.browser import check_page, find_chromium
+
+pytestmark = pytest.mark.engine
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    exe = find_chromium()
+    if exe is None:
+        pytest.fail("chromium is not installed; run `bash .ci/setup` (Debian packages chromium, chromium-driver)")
+    return exe
+
+
+def _png_ok(path: Path):
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_checker_catches_a_broken_page(chromium, tmp_path):
+    bad = tmp_path / "bad.html"
+    bad.write_text("<!DOCTYPE html><html><head><title>t</title></head><body><img src='missing.png'>"
+                   "<script>console.error('boom'); nope();</script></body></html>")
+    r = check_page(bad, tmp_path / "bad.png")
+    assert not r.ok
+    assert any("boom" in m for m in r.console_errors) and r.exceptions and r.broken_images == 1
+
+
+def test_run_report_opens_offline(chromium, liggghts_run, tmp_path):
+    out = tmp_path / "run.html"
+    cp = subprocess.run([sys.executable, "-m", "orchestrator", "report", str(liggghts_run), "--out", str(out)],
+                        capture_output=True, text=True, timeout=300)
+    assert cp.returncode == 0, cp.stderr
+    html = out.read_text()
+    for section in ("Substitutions", "Stability and protocol checks", "Run time", "Analyses", "Resolved case"):
+        assert section in html
+    assert "seed000_damping" in html
+    r = check_page(out, tmp_path / "run.png")
+    assert r.ok, r.problems()
+    assert r.requests == []                          # nothing fetched: no CDN, no network
+    assert r.images >= 8 and r.broken_images == 0 and r.title.startswith("Run report")
+    _png_ok(tmp_path / "run.png")
+
+
+def test_compare_report_opens_offline(chromium, crossval_smoke, tmp_path):
+    page = crossval_smoke.comparison.files["html"]
+    r = check_page(page, tmp_path / "cmp.png")
+    assert r.ok, r.problems()
+    assert r.requests == [] and r.images >= 30 and r.broken_images == 0
+    _png_ok(tmp_path / "cmp.png")
+
+
+def test_compare_cli(liggghts_run, tmp_path):
+    out = tmp_path / "cli"
+    cp = subprocess.run([sys.executable, "-m", "orchestrator", "compare", str(liggghts_run), str(liggghts_run),
+                         "--out", str(out), "--measure", "profiles", "--measure", "rdf", "--states", "all"],
+                        capture_output=True, text=True, timeout=300)
+    assert cp.returncode == 0, cp.stderr
+    import pandas as pd
+    t = pd.read_csv(out / "comparison.csv")
+    assert set(t.measure) == {"profiles", "rdf"} and (t.distance.dropna() == 0).all()
+    assert len(t[t.measure == "rdf"]) == 5          # all five matched states
