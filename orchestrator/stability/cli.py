@@ -72,8 +72,16 @@ def cmd_convergence(args) -> int:
                  workers=args.workers, plot=args.plot or Path(args.runs) / "convergence" /
                  f"{Path(args.case).stem}-{args.knob}.png")
     df = out["table"]
-    cols = [c for c in df.columns if not c.startswith("err_") or c in ("err_mu_macro",)]
-    _print_df(df[cols], f"Error against run time: {args.case}, knob {args.knob}")
+    cols = ["engine", args.knob, "status", "engine_time_s", "error"] + [c for c in df.columns if c.startswith("err_")]
+    show = df[cols].rename(columns=lambda c: c.replace("err_", "e:"))
+    _print_df(show, f"Error against run time: {args.case}, knob {args.knob} (e: relative errors)")
+    obs = [c for c in df.columns if c not in cols and c not in ("total_time_s", "reference", "run_id")
+           and not c.startswith("err_")]
+    if obs:
+        _print_df(df[["engine", args.knob] + obs], "observables")
+    if args.csv:
+        from ..atomic import write_text
+        write_text(args.csv, df.to_csv(index=False))
     con = _console()
     for eng, r in out["recommendation"].items():
         con.print(f"[green]{eng}[/green]: recommended {args.knob} = {r[args.knob]} (error {r['error']:.3g}, "
@@ -150,6 +158,7 @@ def add_parsers(sub):
     c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
     c.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: clean timings)")
     c.add_argument("--plot", help="plot file (default RUNS/convergence/CASE-KNOB.png)")
+    c.add_argument("--csv", help="also write the table as CSV")
     c.set_defaults(func=cmd_convergence)
 
     w = sub.add_parser("sweep", help="run a case over field values (list or --grid), reusing finished runs")

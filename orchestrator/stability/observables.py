@@ -68,7 +68,13 @@ def _shear_cell(case, fr, params) -> dict:
     p = fr.position[-1]
     ok = ~np.isnan(p).any(1)
     z = p[ok, 2]
-    edges = np.linspace(0.0, sc["geometry"]["z_upper_face"], 11)      # fixed bins: comparable across runs
+    # bins between the lower piston face at the end and the upper face: comparable across runs
+    z_lo = 0.0
+    try:
+        z_lo = float(fr.wall("lower_piston")["position_z"].iloc[-1])
+    except Exception:
+        pass
+    edges = np.linspace(z_lo, sc["geometry"]["z_upper_face"], 11)
     h, _ = np.histogram(z, edges)
     out["density_profile"] = [float(x) for x in h / max(1, ok.sum())]
     return out
