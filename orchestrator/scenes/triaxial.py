@@ -175,24 +175,6 @@ class Lateral(Strict):
     update_every: int = Field(20, ge=1)
 
 
-class Clumps(Strict):
-    """Rigid clumps from a shape library: each shape is a list of [x, y, z, r] spheres in units of
-    its equivalent-volume diameter; every sampled grain gets shape ``k mod len(shapes)`` (or a
-    random shape with ``random: true``), scaled to its sampled diameter and randomly rotated."""
-    shapes: list[list[tuple[float, float, float, float]]]
-    random: bool = True
-
-    @field_validator("shapes")
-    @classmethod
-    def _shapes(cls, v):
-        if not v or any(len(s) < 1 for s in v):
-            raise ValueError("give at least one shape with at least one sphere")
-        for s in v:
-            if any(r[3] <= 0 for r in s):
-                raise ValueError("sphere radii must be positive")
-        return v
-
-
 class Scene(Strict):
     kind: Literal["triaxial"]
     diameter: Length = "12 mm"
@@ -208,7 +190,6 @@ class Scene(Strict):
     isotropic: Isotropic = Field(default_factory=Isotropic)
     membrane: Membrane = Field(default_factory=Membrane)
     lateral: Lateral = Field(default_factory=Lateral)
-    clumps: Clumps | None = None
     frames: int = Field(20, ge=2, description="frames written during axial loading")
     series_every: int | None = Field(None, ge=1, description="steps between time-series rows (None: derived)")
 
@@ -225,8 +206,6 @@ class Scene(Strict):
 # ---------------------------------------------------------------------------------------------
 def required_features(case) -> list[str]:
     feats = ["hertz", "restitution_damping", "sliding_friction", "membrane"]
-    if case.scene.clumps is not None:
-        feats.append("clumps")
     if case.output.stress:
         feats.append("particle_stress")
     if case.output.contacts:
@@ -562,7 +541,7 @@ def _window_mean(steps, values, at, half):
 
 
 def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positions) -> dict:
-    """Controls per frame, wall/time series and the scene summary (``triaxial.json``)."""
+    """Controls per frame, wall/time series and the scene summary (``scene_summary.json``)."""
     from ..atomic import write_json
     from ..particles_io import read_particle_table
     sc = params["scene"]
@@ -633,7 +612,7 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
             "volumetric_strain_max_abs_diff": float(np.max(np.abs(controls["volumetric_strain"] -
                                                                   controls["volumetric_strain_hull"]))),
         }
-    write_json(Path(run_dir) / "triaxial.json", summ)
+    write_json(Path(run_dir) / "scene_summary.json", summ)        # runner copies it into summary.json
     walls = {
         "platen_top": {"time": s["time"], "position": np.column_stack([0 * st, 0 * st, s["z_top"]]),
                        "force": np.column_stack([0 * st, 0 * st, -s["f_top"]])},
@@ -690,4 +669,10 @@ def liggghts_extras(run_dir, params) -> dict:
 
 def yade_extras(run_dir, params) -> dict:
     steps, positions = _frame_positions_yade(run_dir)
-    return compute_extras(run_dir, params, steps, positions)
+    out = compute_extras(run_dir, params, steps, positions)
+    mfile = Path(run_dir) / "dump" / "membrane.npz"
+    if mfile.exists():                          # membrane node positions at the frame times
+        m = np.load(mfile)
+        out["walls"]["membrane"] = {"time": m["time"], "step": m["iter"], "node_position": m["position"],
+                                    "triangles": m["triangles"], "node_radius": np.array([m["node_radius"]])}
+    return out
