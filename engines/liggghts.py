@@ -68,6 +68,8 @@ class Liggghts(Engine):
         },
         "membrane": {
             "servo_ring_walls": "a stack of independently servo-controlled cylindrical ring walls",
+            "shell_pressure": "radial forces p·(band envelope area)·r_i²/Σr_j² on the outer shell of grains of "
+                              "each horizontal band, recomputed during the run (scenes/triaxial.py)",
         },
     }
 
@@ -190,9 +192,14 @@ class Liggghts(Engine):
                         out = np.full((len(ids), 3), np.nan)
                         out[rows] = a[:, [cols.index(c) for c in names]]
                         arrays[field] = out
+                if "stress" in fields:
+                    out = np.full((len(ids), 3, 3), np.nan)
+                    out[rows] = _stress_tensors(a, cols)
+                    arrays["stress"] = out
                 k = w.t
+                contacts = read_contacts(run_dir / "dump" / f"contacts.{step}.txt") if case.output.contacts else None
                 w.append(step * dt, step, controls={c: v[k] if k < len(v) else np.nan for c, v in controls.items()},
-                         **arrays)
+                         contacts=contacts, **arrays)
             for name, series in extras.get("walls", {}).items():
                 series = dict(series)
                 w.write_wall(name, series.pop("time"), **series)
@@ -208,8 +215,38 @@ def dump_columns(case) -> list[str]:
     """The per-atom columns the case needs in LIGGGHTS' dump (id first)."""
     cols = ["id"]
     for field in _fields(case):
-        cols += list(_COLUMNS[field])
+        cols += list(_COLUMNS.get(field, ()))
+    if case.output.stress:
+        cols += ["radius"] + [f"c_pstress[{k}]" for k in range(1, 7)]
     return cols
+
+
+def _stress_tensors(a: np.ndarray, cols: list[str]) -> np.ndarray:
+    """(n, 3, 3) particle stress [Pa] from ``compute stress/atom`` (stress x volume, components
+    xx yy zz xy xz yz, tension positive) divided by the sphere's volume."""
+    s = a[:, [cols.index(f"c_pstress[{k}]") for k in range(1, 7)]]
+    v = 4.0 / 3.0 * np.pi * a[:, cols.index("radius")] ** 3
+    s = s / v[:, None]
+    out = np.empty((len(a), 3, 3))
+    for k, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        out[:, i, j] = out[:, j, i] = s[:, k]
+    return out
+
+
+def read_contacts(path) -> dict | None:
+    """One frame of ``compute pair/gran/local pos id force_normal force_tangential contactPoint``
+    (dump local): ids i, j; contact point; unit normal from i to j; normal and tangential force
+    on i. None when the file is missing."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    lines = path.read_bytes().split(b"\n", 9)
+    n = int(lines[3])
+    a = np.array(lines[9].split(), dtype=np.float64).reshape(n, 18) if n else np.zeros((0, 18))
+    d = a[:, 3:6] - a[:, 0:3]
+    normal = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    return {"i": a[:, 6].astype(np.int64), "j": a[:, 7].astype(np.int64), "point": a[:, 15:18],
+            "normal": normal, "fn": a[:, 9:12], "ft": a[:, 12:15]}
 
 
 def scan_binary_dump(raw: bytes, ncols: int):
@@ -286,7 +323,8 @@ def truncate_binary_dump(path, ncols: int, max_step: int) -> int:
 def _fields(case) -> list[str]:
     o = case.output
     return ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
-                                           ("force", o.force), ("torque", o.torque)) if on]
+                                           ("force", o.force), ("torque", o.torque)) if on] + \
+        (["stress"] if o.stress else [])
 
 
 def _scene_hook(case, name, *args) -> dict:

@@ -220,6 +220,9 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         "substitutions": [s.as_dict() for s in subs], "dt": params["dt"],
     }
     eng.parse(case, params, run_dir, meta)
+    scene_summary = run_dir / "scene_summary.json"      # written by a scene's extras hook, if any
+    if scene_summary.exists():
+        summary["scene"] = json.loads(scene_summary.read_text())
     timings["parse"] = time.perf_counter() - t2
     summary["status"] = "complete"
     summary["steps_run"] = res.steps
