@@ -174,6 +174,40 @@ class InitialPacking(Strict):
     frame: int = Field(0, description="frame index (negative counts from the end)")
 
 
+class CTSegment(Strict):
+    """Segmentation of each scan (orchestrator.ct.segment): Gaussian ``sigma`` [voxels], marker
+    height ``h`` (default one voxel), SH expansion to ``degree`` unless ``shape: false``."""
+    sigma: float = Field(1.0, gt=0)
+    h: Length | None = None
+    shape: bool = True
+    degree: int = Field(15, ge=0, le=30)
+
+
+class CTTrack(Strict):
+    """Tracking between consecutive scans (orchestrator.ct.track): ``displacement`` (seed 000),
+    ``rotation`` (image-based local rotation as prediction, seed 000 §2.2) or ``invariants``
+    (SH matching, seed 001 Algorithm 1); ``max_disp`` [m] (default d50/2)."""
+    method: Literal["displacement", "rotation", "invariants"] = "displacement"
+    max_disp: Length | None = None
+    rings: int = Field(4, ge=1)
+
+
+class CTSeries(Strict):
+    """A scan series to turn into CT frames (``orchestrator ct run CASE``): ``scans`` are files,
+    directories or globs, relative to the case file, in time order."""
+    scans: list[str]
+    voxel_size: Length | None = None
+    segment: CTSegment = Field(default_factory=CTSegment)
+    track: CTTrack = Field(default_factory=CTTrack)
+
+    @field_validator("scans")
+    @classmethod
+    def _scans(cls, v):
+        if not v:
+            raise ValueError("give at least one scan file, directory or glob, e.g. ['scans/scan_*.tif']")
+        return v
+
+
 # ---------------------------------------------------------------------------------------------
 # The case
 # ---------------------------------------------------------------------------------------------
@@ -202,6 +236,7 @@ class Case(Strict):
     engine_options: EngineOptions = Field(default_factory=EngineOptions)
     stability: StabilityOptions = Field(default_factory=StabilityOptions)
     analysis: list[str | dict] = Field(default_factory=list)
+    ct: CTSeries | None = None
     initial_packing: InitialPacking | None = None
 
     @field_validator("analysis")
@@ -233,6 +268,7 @@ class Case(Strict):
         launch settings that do not change the result (progress bar, wall-clock limit)."""
         d = self.resolved()
         d.pop("analysis", None)
+        d.pop("ct", None)
         d.pop("description", None)
         d.get("engine_options", {}).pop("progress", None)
         d.get("engine_options", {}).pop("timeout", None)

@@ -74,7 +74,22 @@ def add_ct_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--voxel-size", help="voxel edge for scans that lack it")
     p.add_argument("--rings", type=int, default=4, help="rings of equal area (rotation method)")
     p.set_defaults(func=track_main)
+
+    p = sub.add_parser("run", help="segment and track the scan series of a case's ct: section")
+    p.add_argument("case", help="case YAML with a ct: section")
+    p.add_argument("--runs", default="runs", help="runs directory (default ./runs)")
+    p.add_argument("--force", action="store_true", help="process the series again")
+    p.set_defaults(func=run_main)
     return ct
+
+
+def run_main(args) -> int:
+    from ..case import load_case
+    from .case_run import run_ct_case
+    case = load_case(args.case)
+    out = run_ct_case(case, args.runs, force=args.force)
+    print(f"ct frames: {out}")
+    return 0
 
 
 def synth_main(args) -> int:
