@@ -22,7 +22,8 @@ def _print_df(df, title, floatfmt="{:.4g}"):
     for c in df.columns:
         t.add_column(str(c))
     for _, r in df.iterrows():
-        t.add_row(*[floatfmt.format(v) if isinstance(v, float) else str(v) for v in r.to_list()])
+        from rich.markup import escape
+        t.add_row(*[floatfmt.format(v) if isinstance(v, float) else escape(str(v)) for v in r.to_list()])
     _console().print(t)
 
 
@@ -83,10 +84,11 @@ def cmd_convergence(args) -> int:
         from ..atomic import write_text
         write_text(args.csv, df.to_csv(index=False))
     con = _console()
+    from rich.markup import escape
     for eng, r in out["recommendation"].items():
         con.print(f"[green]{eng}[/green]: recommended {args.knob} = {r[args.knob]} (error {r['error']:.3g}, "
                   f"engine time {r['engine_time_s']:.3g} s{', ' + r['note'] if 'note' in r else ''}); "
-                  f"Pareto front: {r['pareto']}")
+                  + escape(f"Pareto front: {r['pareto']}"))
     con.print(f"plot: {out['plot']}")
     return 0
 
