@@ -17,6 +17,8 @@ coordinate frame, and which grain is which.
   are matched by position in the reference state (``method="position"``): the exact minimum of the
   summed squared distances with a cut-off (:func:`orchestrator.ct.track.link`, default cut-off
   half a median diameter); grains without a partner are left out of grain-level comparisons.
+  A run started from a frame of the other side (``initial_packing``) uses the ids it inherited
+  (``method="ids (initial packing)"``, with the recorded id shift).
 """
 from __future__ import annotations
 
@@ -219,6 +221,32 @@ def match_identity(a: Frames, b: Frames, ka: int, kb: int, max_distance: float |
                     int(len(rb) - len(la)))
 
 
+def _packing_origin(src: Source):
+    """(frames file, id shift) when ``src`` is a run started from a frame of another frame set."""
+    if src.run_dir is None or not (src.run_dir / "params.json").exists():
+        return None
+    ip = json.loads((src.run_dir / "params.json").read_text()).get("initial_packing")
+    if not isinstance(ip, dict) or "source" not in ip:
+        return None
+    return Path(ip["source"]).resolve(), int(ip.get("id_shift", 0))
+
+
+def _identity_from_packing(A: Source, B: Source, ka: int, kb: int) -> Identity | None:
+    """Ids of a run started from the other side's packing (``initial_packing``) name the same grains
+    (shifted by the recorded offset), whatever happened to the positions since."""
+    for run, other, flip in ((B, A, False), (A, B, True)):
+        o = _packing_origin(run)
+        if o is None or o[0] != Path(other.path).resolve():
+            continue
+        shift = o[1]
+        ids_other = other.frames.ids + shift
+        common, io, ir = np.intersect1d(ids_other, run.frames.ids, return_indices=True)
+        ra, rb = (ir, io) if flip else (io, ir)
+        return Identity(ra, rb, "ids (initial packing)", (ka, kb), 0.0, int(A.frames.n_particles - len(ra)),
+                        int(B.frames.n_particles - len(rb)))
+    return None
+
+
 @dataclass
 class Alignment:
     """Everything :func:`align` decided, for the comparison and the report."""
@@ -262,7 +290,9 @@ def align(a, b, control: str | None = None, tolerance: float | None = None, fram
         raise ValueError(f"frame must be 'none', 'centroid' or 'rigid', got {frame!r}")
     ident = None
     if identity or frame == "rigid":
-        ident = match_identity(A.frames, B.frames, ka, kb, max_distance, transform)
+        ident = _identity_from_packing(A, B, ka, kb)
+        if ident is None:
+            ident = match_identity(A.frames, B.frames, ka, kb, max_distance, transform)
         if frame == "rigid":
             if ident.n < 3:
                 raise ValueError("frame='rigid' needs at least 3 identified grains in the reference state")

@@ -368,7 +368,7 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
         geo = json.loads(geo_path.read_text())
     else:
         r = np.asarray(sc["diameters"]) / 2
-        pos, geo = pack_cylinder(r, sc["diameter"] / 2, sc["height"], np.random.default_rng(case.seed + 2))
+        pos, geo = cached_packing(r, sc["diameter"] / 2, sc["height"], case.seed + 2)
         write_particle_table(run_dir / "particles.txt", sc["ids"], r, case.material.density, pos)
         write_json(geo_path, geo)
     sc.update(geo)
@@ -405,6 +405,25 @@ def _write_square_stl(path: Path, half: float, z: float, up: bool):
 # ---------------------------------------------------------------------------------------------
 # Packing
 # ---------------------------------------------------------------------------------------------
+def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.ndarray, dict]:
+    """:func:`pack_cylinder`, cached by its inputs in ``$ORCHESTRATOR_CACHE/packings`` (default
+    ``~/.cache/orchestrator``), so that both engines' runs of a case pack once."""
+    import hashlib
+    import os
+    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 1)).encode())
+    root = Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / "packings"
+    f = root / f"{h.hexdigest()[:24]}.npz"
+    if f.exists():
+        d = np.load(f)
+        return d["position"], json.loads(str(d["geometry"]))
+    pos, geo = pack_cylinder(r, R, H, np.random.default_rng(seed))
+    root.mkdir(parents=True, exist_ok=True)
+    tmp = f.with_name(f.name + ".partial.npz")
+    np.savez(tmp, position=pos, geometry=json.dumps(geo))
+    os.replace(tmp, f)
+    return pos, geo
+
+
 def pack_cylinder(r: np.ndarray, R: float, H: float, rng: np.random.Generator, tol: float = 1e-3,
                   max_iter: int = 4000) -> tuple[np.ndarray, dict]:
     """Overlap-free random packing of spheres with radii ``r`` [m] in the cylinder ρ ≤ R,

@@ -124,7 +124,8 @@ def test_simulation_from_scanned_packing(ct_frames, runs_root, tmp_path):
     assert out.summary["wall_time"]["engine"] > 0
     # and compares with the scans grain by grain
     cmp = compare(ct_frames, out.run_dir, out_dir=tmp_path / "cmp")
-    assert cmp.grain is not None and cmp.alignment.identity.n >= 0.9 * present.sum()
+    assert cmp.alignment.identity.method == "ids (initial packing)"
+    assert cmp.grain is not None and cmp.alignment.identity.n == present.sum()
     assert np.isfinite(cmp.grain.tables["states"].median_error_d50).all()
     # a packing outside the cell is refused before the engine starts, naming the wall
     bad = tmp_path / "outside.h5"
