@@ -65,13 +65,18 @@ class _CDP:
         self.n = 0
         self.events = []
 
-    def call(self, method, params=None, timeout=30.0):
+    def call(self, method, params=None, timeout=60.0):
+        import websocket
         self.n += 1
         mid = self.n
         self.ws.send(json.dumps({"id": mid, "method": method, "params": params or {}}))
         end = time.time() + timeout
+        self.ws.settimeout(1.0)
         while time.time() < end:
-            msg = json.loads(self.ws.recv())
+            try:
+                msg = json.loads(self.ws.recv())
+            except websocket.WebSocketTimeoutException:
+                continue                    # a busy machine: keep waiting until the deadline
             if msg.get("id") == mid:
                 if "error" in msg:
                     raise RuntimeError(f"{method}: {msg['error']}")
