@@ -143,7 +143,7 @@ class StabilityOptions(Strict):
     monitors: bool = Field(True, description="in-deck monitors stop an unstable run early")
     monitor_checks: int = Field(100, ge=1, description="monitor checks per run")
     ke_factor: float = Field(100.0, gt=1, description="kinetic energy limit / (1/2 M v_max^2 + M g H)")
-    overlap_limit: float = Field(0.6, gt=0, lt=1, description="largest overlap / r_min (raised to 4x the "
+    overlap_limit: float = Field(0.9, gt=0, lt=1, description="largest overlap / r_min (raised to 4x the "
                                                                 "expected static overlap)")
     wall_force_factor: float = Field(20.0, gt=1, description="wall force (and its swing between checks) "
                                                                "limit / target force")
