@@ -180,12 +180,39 @@ class Liggghts(Engine):
         dt = params["dt"]
         extras = _scene_hook(case, "liggghts_extras", run_dir, params)
         controls = extras.get("controls", {})
-        row = {int(i): k for k, i in enumerate(ids)}
+        order = np.argsort(ids)
         with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
                          controls=controls.keys(), mass=mass, meta=meta) as w:
             cols = json.loads((run_dir / "dump" / "columns.json").read_text())
-            for step, a in read_binary_dump(segments, len(cols)):
-                rows = np.array([row[int(i)] for i in a[:, cols.index("id")]], dtype=np.int64)
+            snaps = list(read_binary_dump(segments, len(cols)))
+            steps = np.array([s for s, _ in snaps], dtype=np.int64)
+            same = len({a.shape for _, a in snaps}) == 1
+            if same and snaps:
+                block = np.stack([a for _, a in snaps])                  # (T, n, ncols)
+                sid = block[:, :, cols.index("id")].astype(np.int64)
+                if (sid == sid[0]).all():                                # sorted ids, none lost: one mapping
+                    rows = order[np.searchsorted(ids[order], sid[0])]
+                    arrays = {}
+                    for field, names in _COLUMNS.items():
+                        if field in fields and names[0] in cols:
+                            out = np.full((len(steps), len(ids), 3), np.nan)
+                            out[:, rows] = block[:, :, [cols.index(c) for c in names]]
+                            arrays[field] = out
+                    if "stress" in fields:
+                        out = np.full((len(steps), len(ids), 3, 3), np.nan)
+                        out[:, rows] = _stress_tensors(block, cols)
+                        arrays["stress"] = out
+                    ctl = {c: np.asarray(v, float)[:len(steps)] for c, v in controls.items()}
+                    ctl = {c: np.pad(v, (0, len(steps) - len(v)), constant_values=np.nan) for c, v in ctl.items()}
+                    done = w.append_block(steps * dt, steps, controls=ctl, **arrays)
+                    if case.output.contacts:
+                        for k, step in zip(done, steps):
+                            c = read_contacts(run_dir / "dump" / f"contacts.{step}.txt")
+                            if c is not None:
+                                w.write_contacts(k, c)
+                    snaps = []
+            for step, a in snaps:                                        # atoms lost or inserted: frame by frame
+                rows = order[np.searchsorted(ids[order], a[:, cols.index("id")].astype(np.int64))]
                 arrays = {}
                 for field, names in _COLUMNS.items():
                     if field in fields and names[0] in cols:
@@ -196,8 +223,8 @@ class Liggghts(Engine):
                     out = np.full((len(ids), 3, 3), np.nan)
                     out[rows] = _stress_tensors(a, cols)
                     arrays["stress"] = out
-                k = w.t
                 contacts = read_contacts(run_dir / "dump" / f"contacts.{step}.txt") if case.output.contacts else None
+                k = w.t
                 w.append(step * dt, step, controls={c: v[k] if k < len(v) else np.nan for c, v in controls.items()},
                          contacts=contacts, **arrays)
             for name, series in extras.get("walls", {}).items():
@@ -224,12 +251,12 @@ def dump_columns(case) -> list[str]:
 def _stress_tensors(a: np.ndarray, cols: list[str]) -> np.ndarray:
     """(n, 3, 3) particle stress [Pa] from ``compute stress/atom`` (stress x volume, components
     xx yy zz xy xz yz, tension positive) divided by the sphere's volume."""
-    s = a[:, [cols.index(f"c_pstress[{k}]") for k in range(1, 7)]]
-    v = 4.0 / 3.0 * np.pi * a[:, cols.index("radius")] ** 3
-    s = s / v[:, None]
-    out = np.empty((len(a), 3, 3))
+    s = a[..., [cols.index(f"c_pstress[{k}]") for k in range(1, 7)]]
+    v = 4.0 / 3.0 * np.pi * a[..., cols.index("radius")] ** 3
+    s = s / v[..., None]
+    out = np.empty(a.shape[:-1] + (3, 3))
     for k, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        out[:, i, j] = out[:, j, i] = s[:, k]
+        out[..., i, j] = out[..., j, i] = s[..., k]
     return out
 
 

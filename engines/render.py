@@ -1,6 +1,7 @@
 """Jinja rendering shared by the adapters: strict undefined variables, exact numbers."""
 from __future__ import annotations
 
+import functools
 import hashlib
 from pathlib import Path
 
@@ -18,7 +19,13 @@ def _num(x) -> str:
     return repr(float(x))
 
 
+@functools.lru_cache(maxsize=1)
 def environment() -> jinja2.Environment:
+    """One Jinja environment per process (it caches compiled templates)."""
+    return _environment()
+
+
+def _environment() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True, trim_blocks=False, lstrip_blocks=False)
     env.filters["num"] = _num

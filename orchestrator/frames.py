@@ -168,6 +168,45 @@ class FrameWriter:
             self._flush()
         return k
 
+    def append_block(self, time, step=None, controls: Mapping[str, np.ndarray] | None = None,
+                     **per_particle) -> range:
+        """Append B frames at once: ``time`` (B,), ``step`` (B,), each field (B, N, ...) in id
+        order. Much faster than B calls of :meth:`append` for many small frames."""
+        time = np.atleast_1d(np.asarray(time, dtype=np.float64))
+        B = len(time)
+        step = np.zeros(B, np.int64) if step is None else np.asarray(step, np.int64)
+        controls = dict(controls or {})
+        unknown = set(controls) - set(self.controls)
+        if unknown:
+            raise ValueError(f"controls {sorted(unknown)} were not declared in FrameWriter(controls=...)")
+        if per_particle.get("position") is None:
+            raise ValueError("every frame needs a position array")
+        extra = {k for k, v in per_particle.items() if v is not None and k not in self.fields}
+        if extra:
+            raise ValueError(f"fields {sorted(extra)} were not declared in FrameWriter(fields=...)")
+        self._flush()
+        fr = self.h5["frames"]
+        k0 = fr["time"].shape[0]
+        k1 = k0 + B
+        cols = {"time": time, "step": step}
+        for c in self.controls:
+            cols[c] = np.broadcast_to(np.asarray(controls.get(c, np.nan), dtype=np.float64), (B,))
+        for name, v in cols.items():
+            fr[name].resize((k1,))
+            fr[name][k0:k1] = v
+        for f in self.fields:
+            ds = fr[f]
+            shape = (B, self.n) + PER_PARTICLE_FIELDS[f]
+            a = per_particle.get(f)
+            ds.resize((k1,) + ds.shape[1:])
+            if a is not None:
+                a = np.asarray(a, dtype=np.float64)
+                if a.shape != shape:
+                    raise ValueError(f"{f}: expected shape {shape}, got {a.shape}")
+                ds[k0:k1] = a
+        self.t = k1
+        return range(k0, k1)
+
     def _flush(self):
         buf = getattr(self, "_buf", None)
         if not buf:
