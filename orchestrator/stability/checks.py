@@ -173,6 +173,12 @@ def check(case, params: dict) -> dict:
               "damping_factor": cs["damping_factor"], "damping_ratio": cs["damping_ratio"],
               "speed": cs["speed"], "wall_speeds": cs["wall_speeds"], "confining_stress": cs["confining_stress"],
               "skin": cs["skin"], "contacts": cs["contacts"]}
+    worst = max(c["overlap"] for c in cs["contacts"].values() if "overlap" in c) / params["r_min"]
+    if worst > 0.1:
+        report["warnings"] = [f"the stiffest contact is expected at an overlap of {worst:.2g} r_min (a big grain's "
+                              f"share of the confining force on two smallest grains): Hertz is not valid there, and "
+                              f"the measured stable dt can fall below this check (cases/stability/very_soft: "
+                              f"docs/stability.md)"]
     if over and not case.timestep.allow_unsafe:
         lines = [f"{k}: dt/limit = {fractions[k]:.3g} > {safe[k]:g} (limit {cs['limits'][k]:.3e} s)" for k in over]
         raise DerivationError(

@@ -49,6 +49,8 @@ def cmd_stability(args) -> int:
         rep = derive(case)["stability"]
         con.print(f"[bold]{case.name}[/bold]: dt = {rep['dt']:.3e} s; limits: "
                   + ", ".join(f"{k} {v:.3e} s ({rep['fractions'][k]:.3g})" for k, v in rep["limits"].items()))
+        for w in rep.get("warnings", []):
+            con.print(f"  [yellow]warning[/yellow]: {w}")
         for eng in ([args.engine] if args.engine != "all" else case.engines):
             b = bisect(c, eng, runs_root=args.runs, rel_tol=args.tol, log=con.print)
             results.append(b)
