@@ -1,4 +1,4 @@
-"""Command line: ``orchestrator run|validate|engines|verify|analyze|vtk|ct …`` (``--help`` on each)."""
+"""Command line: ``orchestrator <command>`` (``--help`` on each)."""
 from __future__ import annotations
 
 import argparse
