@@ -80,7 +80,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     import pandas as pd
     from ..case import load_case
     from .executor import get_executor, run_task
-    from .sweep import _finished, plan
+    from .sweep import _finished
     case0 = load_case(case_path)
     engines = engines or case0.engines
     rows = []
@@ -90,9 +90,14 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             tasks = []
             for v in values:
                 ov = knob_overrides(case_path, knob, v)
-                t = plan(case_path, [{}], [eng], runs_root)[0] if False else None
+                from ..case import CaseError
                 from ..runner import run_dir_for
-                c = load_case(case_path, overrides=ov)
+                try:
+                    c = load_case(case_path, overrides=ov)
+                except CaseError as exc:             # e.g. a dt the pre-run check refuses: a row, not a crash
+                    tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "point": {knob: v},
+                                  "run_dir": None, "run_id": None, "refused": str(exc)})
+                    continue
                 rd = run_dir_for(c, eng, runs_root)
                 tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
                               "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name})
@@ -100,6 +105,9 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             todo = []
             for k, t in enumerate(tasks):
                 from ..runner import read_summary
+                if t.get("refused"):
+                    results[k] = {"status": "refused", "error": t["refused"]}
+                    continue
                 s = read_summary(t["run_dir"]) or {}
                 if (s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()) \
                         or s.get("status") == "unstable":
@@ -138,31 +146,41 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     return out
 
 
+def _py(v):
+    return v.item() if hasattr(v, "item") else v
+
+
 def recommend(df, knob: str, target_error: float) -> dict:
     """Per engine: the cheapest (engine time) non-reference run with error ≤ target (else the
     reference) and its Pareto front."""
+    import pandas as pd
     out = {}
     for eng, g in df.groupby("engine"):
         g = g.reset_index(drop=True)
-        t = g["engine_time_s"].astype(float).to_numpy()
-        e = g["error"].astype(float).to_numpy()
+        t = pd.to_numeric(g["engine_time_s"], errors="coerce").to_numpy(float)
+        e = pd.to_numeric(g["error"], errors="coerce").to_numpy(float)
         e_plot = np.where(g["reference"], 0.0, e)
         front = pareto(t, e_plot)
         ok = g[(~g["reference"]) & (g["error"] <= target_error)]
         if len(ok):
             best = ok.loc[ok["engine_time_s"].astype(float).idxmin()]
-            out[eng] = {knob: best[knob], "error": float(best["error"]), "engine_time_s": float(best["engine_time_s"]),
+            out[eng] = {knob: _py(best[knob]), "error": float(best["error"]), "engine_time_s": float(best["engine_time_s"]),
                         "speed_up_vs_reference": float(g.loc[g["reference"], "engine_time_s"].iloc[0] / best["engine_time_s"]),
-                        "pareto": [g.loc[k, knob] for k in front]}
+                        "pareto": [_py(g.loc[k, knob]) for k in front]}
         else:
             ref = g[g["reference"]].iloc[0]
-            out[eng] = {knob: ref[knob], "error": 0.0, "engine_time_s": float(ref["engine_time_s"]),
+            if ref["status"] != "complete":
+                out[eng] = {knob: None, "error": float("nan"), "engine_time_s": float("nan"),
+                            "note": f"the reference did not complete ({ref['status']})", "pareto": []}
+                continue
+            out[eng] = {knob: _py(ref[knob]), "error": 0.0, "engine_time_s": float(ref["engine_time_s"]),
                         "note": f"no cheaper setting within {target_error:g}: keep the reference",
-                        "pareto": [g.loc[k, knob] for k in front]}
+                        "pareto": [_py(g.loc[k, knob]) for k in front]}
     return out
 
 
 def plot_ladder(df, knob: str, path, target_error: float):
+    import pandas as pd
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -172,8 +190,8 @@ def plot_ladder(df, knob: str, path, target_error: float):
         g = g[~g["reference"]]
         if not len(g):
             continue
-        t = g["engine_time_s"].astype(float).to_numpy()
-        e = g["error"].astype(float).to_numpy()
+        t = pd.to_numeric(g["engine_time_s"], errors="coerce").to_numpy(float)
+        e = pd.to_numeric(g["error"], errors="coerce").to_numpy(float)
         ok = np.isfinite(e) & (e > 0)
         ax.loglog(t[ok], e[ok], "o", label=eng)
         for tt, ee, v in zip(t[ok], e[ok], g[knob].to_numpy()[ok]):

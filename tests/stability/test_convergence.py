@@ -19,7 +19,7 @@ def test_pareto_and_errors():
 
 @pytest.mark.engine
 def test_dt_ladder(runs_root, tmp_path, engines_installed):
-    out = ladder(CASE, "dt_fraction", [1.0, 0.5, 0.25], engines=["liggghts"], runs_root=runs_root,
+    out = ladder(CASE, "dt_fraction", [0.8, 0.4, 0.2], engines=["liggghts"], runs_root=runs_root,
                  target_error=0.2, plot=tmp_path / "ladder.png")
     df = out["table"]
     assert len(df) == 3 and (df["status"] == "complete").all()
@@ -32,6 +32,12 @@ def test_dt_ladder(runs_root, tmp_path, engines_installed):
     assert "err_mu_macro" in df.columns
     assert (tmp_path / "ladder.png").stat().st_size > 5000
     rec = out["recommendation"]["liggghts"]
-    assert rec["dt_fraction"] in (1.0, 0.5, 0.25)
+    assert rec["dt_fraction"] in (0.8, 0.4, 0.2)
     if "note" not in rec:
         assert rec["error"] <= 0.2
+
+
+def test_refused_rung_is_a_row(runs_root):
+    # dt_fraction 1.0 is above the tangential limit's safe fraction for this case: refused, not run
+    out = ladder(CASE, "dt_fraction", [1.0], engines=["liggghts"], runs_root=runs_root, reference=1.0)
+    assert out["table"].loc[0, "status"] == "refused"
