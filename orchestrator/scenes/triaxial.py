@@ -165,6 +165,9 @@ class Membrane(Strict):
     update_every: int = Field(5, ge=1, description="steps between updates of the nodal forces")
     damping: float = Field(0.5, ge=0, description="membrane internal viscosity as a fraction of critical "
                                                   "for a node on a grain contact (relative to its neighbours)")
+    correction_limit: float = Field(0.1, ge=0, lt=0.5, description="largest membrane correction |p_applied/p - 1|")
+    correction_rows: int = Field(20, ge=1, description="averaging window (time-series rows) of the correction")
+    correction_gain: float = Field(0.5, ge=0)
 
 
 class Lateral(Strict):
@@ -344,7 +347,9 @@ def derive(case, common: dict) -> dict:
                      "E_facet": E_facet, "k_contact": k_contact, "node_mass": m_node,
                      "friction": m.friction, "update_every": m.update_every, "density": m.density,
                      # relative (membrane-internal) viscosity: critical for a node on a grain contact
-                     "damping": m.damping * 2 * math.sqrt(k_contact * m_node)},
+                     "damping": m.damping * 2 * math.sqrt(k_contact * m_node),
+                     "correction_limit": m.correction_limit, "correction_rows": m.correction_rows,
+                     "correction_gain": m.correction_gain},
         "lateral": {"bands": bands, "sectors": s.lateral.sectors, "shell": s.lateral.shell_thickness * d50,
                     "update_every": s.lateral.update_every},
         "skin": 0.3 * d50,
