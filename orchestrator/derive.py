@@ -237,7 +237,10 @@ def derive(case) -> dict:
     G_pp = effective_shear_modulus(E, nu, E, nu)
     G_pw = effective_shear_modulus(E, nu, Ew, nuw)
     e_target = case.contact.restitution
-    e_in = restitution_input(e_target)
+    try:
+        e_in = restitution_input(e_target)
+    except DerivationError:       # below what LIGGGHTS' clipped Tsuji law can deliver at all:
+        e_in = 0.0                # YADE (unclipped) still can; LIGGGHTS needs its substitute
     v_max = float(mod.max_velocity(case))
     dt_R = rayleigh_time_step(r_min, rho, E, nu)
     # Hertz limit: smallest pair (m* = m/2, R* = r/2) and smallest sphere on a wall at v_max
@@ -263,7 +266,7 @@ def derive(case) -> dict:
         "E_eff_pp": E_pp, "E_eff_pw": E_pw, "G_eff_pp": G_pp, "G_eff_pw": G_pw,
         # LIGGGHTS clips tensile forces (limitForce on): fed the inverse of the clipped law;
         # YADE's Mindlin does not clip: the Tsuji law delivers exactly the e it is fed
-        "restitution": {"target": e_target, "engine_input": e_in, "beta": tsuji_beta(e_in),
+        "restitution": {"target": e_target, "engine_input": e_in, "beta": tsuji_beta(e_in) if e_in > 0 else -1.0,
                         "yade_input": e_target, "damping_ratio": zeta},
         "friction": case.contact.friction,
         "tangential_stiffness_ratio": kt_ratio,
