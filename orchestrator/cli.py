@@ -91,8 +91,13 @@ def cmd_engines(args) -> int:
 def cmd_verify(args) -> int:
     from rich.table import Table
     from .verify import run_verification
+    from .verify import verification_cases
     engines = ["liggghts", "yade"] if args.engine == "all" else [args.engine]
-    tab = run_verification(engines=engines, runs_root=args.runs, force=args.force)
+    cases = [p for p in verification_cases() if not args.case or any(c in p.stem for c in args.case)]
+    if not cases:
+        print(f"error: no verification case matches {args.case}", file=sys.stderr)
+        return 2
+    tab = run_verification(engines=engines, cases=cases, runs_root=args.runs, force=args.force)
     con = _console()
     for eng in engines:
         sub = tab[tab.engine == eng]
@@ -174,6 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     vf.add_argument("--runs", default="runs")
     vf.add_argument("--force", action="store_true")
     vf.add_argument("--csv", help="also write the table as CSV")
+    vf.add_argument("--case", action="append", help="only cases whose name contains this (repeatable)")
     vf.set_defaults(func=cmd_verify)
 
     a = sub.add_parser("analyze", help="run analyses on a run directory or CT frame set")

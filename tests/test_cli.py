@@ -60,8 +60,9 @@ def test_dry_run_renders_and_estimates(tmp_path, engines_installed):
 
 @pytest.mark.engine
 def test_verify_prints_a_table_per_engine(runs_root, engines_installed, tmp_path):
-    # reuses the runs tests/test_verification.py made in the same session (or makes them)
-    out = cli("verify", "--runs", runs_root, "--csv", tmp_path / "verify.csv", timeout=1800)
+    # the command end to end on test 1 and test 4 (tests/test_verification.py covers every case)
+    out = cli("verify", "--runs", runs_root, "--csv", tmp_path / "verify.csv", "--case", "_1_sphere_sphere_glass",
+              "--case", "oblique", timeout=1800)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     assert "— liggghts" in out.stdout and "— yade" in out.stdout
     assert "checks within tolerance" in out.stdout
@@ -69,6 +70,8 @@ def test_verify_prints_a_table_per_engine(runs_root, engines_installed, tmp_path
     t = pd.read_csv(tmp_path / "verify.csv")
     assert set(t.engine) == {"liggghts", "yade"} and t["pass"].all()
     assert {"contact_time", "peak_force", "e_n", "e_t", "max_overlap"} <= set(t.quantity)
+    assert set(t.case) == {"chung_ooi_1_sphere_sphere_glass", "chung_ooi_4_oblique"}
+    assert cli("verify", "--case", "no_such_case").returncode == 2
 
 
 @pytest.mark.engine
