@@ -24,7 +24,6 @@ from __future__ import annotations
 import functools
 import math
 
-import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
@@ -176,6 +175,18 @@ def sqrt_damping_gamma(e_target: float, m_eff: float, R_eff: float, E_eff: float
     b = brentq(lambda b: _sqrt_damping_restitution(round(b, 12)) - e_target, 1e-9, 50.0, xtol=1e-12)
     d0 = hertz_max_overlap(m_eff, R_eff, E_eff, v)
     return b * v / (d0 * math.sqrt(R_eff * d0))
+
+
+def adhesion_force(case) -> float:
+    """Pull-off force F_adh [N] at the median contact (seed 000 eq. 1's constant), 0 without
+    adhesion: the case's ``contact.adhesion.force``, or DMT 4π γ r_eff from a surface energy with
+    r_eff = d50/4 (two median spheres)."""
+    a = case.contact.adhesion
+    if a is None:
+        return 0.0
+    if a.force is not None:
+        return a.force
+    return 4 * math.pi * a.surface_energy * case.scene.psd.median / 4
 
 
 # ----------------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ..case import Strict
-from ..derive import DerivationError
+from ..derive import adhesion_force, DerivationError
 from ..units import Pressure
 from .shear_cell import PSD
 
@@ -75,7 +75,7 @@ def required_features(case) -> list[str]:
     feats = ["hertz", "restitution_damping", "periodic"]
     if c.friction > 0:
         feats.append("sliding_friction")
-    if _adhesion_force(case) > 0:
+    if adhesion_force(case) > 0:
         feats.append("adhesion")
     if c.rolling is not None or c.torsion is not None:
         raise DerivationError("contact.rolling / contact.torsion: the plane-shear scene has no rolling or twisting "
@@ -83,15 +83,6 @@ def required_features(case) -> list[str]:
     if c.damping != "restitution":
         raise DerivationError("contact.damping: the plane-shear scene uses 'restitution' damping")
     return feats
-
-
-def _adhesion_force(case) -> float:
-    a = case.contact.adhesion
-    if a is None:
-        return 0.0
-    if a.force is not None:
-        return a.force
-    return 4 * math.pi * a.surface_energy * case.scene.psd.median / 4
 
 
 def _mean_volume(s) -> float:
@@ -178,7 +169,7 @@ def derive(case, common: dict) -> dict:
     n_mobile = s.n_particles
     nw = g["n_wall"]
     # contact terms
-    F_adh = _adhesion_force(case)
+    F_adh = adhesion_force(case)
     contact = {"adhesion_force": F_adh, "restitution": dict(common["restitution"])}
     if F_adh > 0:
         r_eff = x50 / 4

@@ -27,7 +27,6 @@ to both engines.
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Literal
@@ -36,7 +35,7 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from ..case import Strict
-from ..derive import DerivationError, effective_modulus, yade_wall_young, tsuji_beta, restitution_input
+from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
 from ..units import Angle, AngularVelocity, Length, Pressure
 
 CONTROLS: tuple[str, ...] = ("angle", "stage")
@@ -192,24 +191,13 @@ def required_features(case) -> list[str]:
              "mesh_walls", "rotating_walls", "servo_wall"]
     if c.friction > 0:
         feats.append("sliding_friction")
-    if _adhesion_force(case) > 0:
+    if adhesion_force(case) > 0:
         feats.append("adhesion")
     if c.rolling is not None and (c.rolling.model == "seed000" or c.rolling.coefficient > 0):
         feats.append("rolling_friction_load" if c.rolling.model == "seed000" else "rolling_friction")
     if c.torsion is not None and c.torsion.coefficient > 0:
         feats.append("torsion_friction")
     return feats
-
-
-def _adhesion_force(case) -> float:
-    """F_adh [N] at the mean reduced radius (0 without adhesion)."""
-    a = case.contact.adhesion
-    if a is None:
-        return 0.0
-    if a.force is not None:
-        return a.force
-    r_eff = case.scene.psd.median / 4
-    return 4 * math.pi * a.surface_energy * r_eff
 
 
 def _omega(case) -> float:
@@ -324,7 +312,7 @@ def derive(case, common: dict) -> dict:
     for st in sorted(set(frame_steps) | set(begins) | {s3}):
         events.append({"step": st, "frame": st in frame_steps, "begin": begins.get(st, "")})
     # ---- contact terms (both engines get the same numbers)
-    F_adh = _adhesion_force(case)
+    F_adh = adhesion_force(case)
     r_eff_mean = x50 / 4
     E_pw = common["E_eff_pw"]
     xi, Fc = _expected_overlap(case, E_pp, F_adh)
@@ -519,12 +507,19 @@ def liggghts_extras(run_dir, params) -> dict:
             rows.append(a)
     steps = [int(st) for st in params["scene"]["frame_steps"]]   # the deck writes exactly these
     out = {"controls": _frame_controls(params, steps)}
+    return _with_walls(out, rows, run_dir, params)
+
+
+def _with_walls(out: dict, rows: list, run_dir, params) -> dict:
+    """Add the wall series from sampled rows (columns: step, z_lower, fx fy fz (lower),
+    tz_lower, tz_upper, tz_cylinder) and write the compression check."""
+    rows = [r for r in rows if r.size]
     if rows:
         a = np.vstack(rows)
-        # columns: step, z_lower, fx fy fz (lower), tz_lower, tz_upper, tz_cylinder
+        zeros = np.zeros(len(a))
         walls, st = _wall_result(params, a[:, 0].astype(np.int64), a[:, 1], a[:, 2:5],
-                                 np.column_stack([np.zeros(len(a)), np.zeros(len(a)), a[:, 6] + a[:, 7]]),
-                                 np.column_stack([np.zeros(len(a)), np.zeros(len(a)), a[:, 5]]))
+                                 np.column_stack([zeros, zeros, a[:, 6] + a[:, 7]]),
+                                 np.column_stack([zeros, zeros, a[:, 5]]))
         _write_check(run_dir, params, walls, st)
         out["walls"] = walls
     return out
@@ -539,12 +534,4 @@ def yade_extras(run_dir, params) -> dict:
         steps += [int(i) for i in np.load(c)["iter"]]
     steps = sorted(set(steps))
     out = {"controls": _frame_controls(params, steps)}
-    rows = [r for r in rows if r.size]
-    if rows:
-        a = np.vstack(rows)
-        walls, st = _wall_result(params, a[:, 0].astype(np.int64), a[:, 1], a[:, 2:5],
-                                 np.column_stack([np.zeros(len(a)), np.zeros(len(a)), a[:, 6] + a[:, 7]]),
-                                 np.column_stack([np.zeros(len(a)), np.zeros(len(a)), a[:, 5]]))
-        _write_check(run_dir, params, walls, st)
-        out["walls"] = walls
-    return out
+    return _with_walls(out, rows, run_dir, params)
