@@ -178,6 +178,7 @@ class Engine(ABC):
                     if not chunk:
                         break
                     logf.write(chunk)
+                    logf.flush()                    # `tail -f engine.log` shows a live run
                     buf += chunk
                     *lines, buf = buf.split(b"\n")
                     for raw in lines:
