@@ -168,6 +168,10 @@ class Membrane(Strict):
     correction_limit: float = Field(0.1, ge=0, lt=0.5, description="largest membrane correction |p_applied/p - 1|")
     correction_rows: int = Field(20, ge=1, description="averaging window (time-series rows) of the correction")
     correction_gain: float = Field(0.5, ge=0)
+    contact_damping: float = Field(0.3, ge=0, description="grain-membrane normal dashpot, fraction of critical")
+    stage2_node_drag: bool = Field(False, description="keep the stage-1 Stokes drag on the membrane nodes (only) "
+                                                     "during axial loading: without it the membrane-grain system "
+                                                     "blew up a few thousand steps into loading")
 
 
 class Lateral(Strict):
@@ -349,7 +353,8 @@ def derive(case, common: dict) -> dict:
                      # relative (membrane-internal) viscosity: critical for a node on a grain contact
                      "damping": m.damping * 2 * math.sqrt(k_contact * m_node),
                      "correction_limit": m.correction_limit, "correction_rows": m.correction_rows,
-                     "correction_gain": m.correction_gain},
+                     "correction_gain": m.correction_gain, "stage2_node_drag": m.stage2_node_drag,
+                     "contact_damping": m.contact_damping},
         "lateral": {"bands": bands, "sectors": s.lateral.sectors, "shell": s.lateral.shell_thickness * d50,
                     "update_every": s.lateral.update_every},
         "skin": 0.3 * d50,
