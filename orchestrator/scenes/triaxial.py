@@ -169,6 +169,8 @@ class Membrane(Strict):
     correction_rows: int = Field(20, ge=1, description="averaging window (time-series rows) of the correction")
     correction_gain: float = Field(0.5, ge=0)
     contact_damping: float = Field(0.3, ge=0, description="grain-membrane normal dashpot, fraction of critical")
+    contact_damping_lagged: bool = Field(False, description="apply the dashpots with the pressure every update_every "
+                                                            "steps (permanent forces) instead of every step: faster")
     stage2_node_drag: bool = Field(False, description="keep the stage-1 Stokes drag on the membrane nodes (only) "
                                                      "during axial loading: without it the membrane-grain system "
                                                      "blew up a few thousand steps into loading")
@@ -354,7 +356,7 @@ def derive(case, common: dict) -> dict:
                      "damping": m.damping * 2 * math.sqrt(k_contact * m_node),
                      "correction_limit": m.correction_limit, "correction_rows": m.correction_rows,
                      "correction_gain": m.correction_gain, "stage2_node_drag": m.stage2_node_drag,
-                     "contact_damping": m.contact_damping},
+                     "contact_damping": m.contact_damping, "contact_damping_lagged": m.contact_damping_lagged},
         "lateral": {"bands": bands, "sectors": s.lateral.sectors, "shell": s.lateral.shell_thickness * d50,
                     "update_every": s.lateral.update_every},
         "skin": 0.3 * d50,
