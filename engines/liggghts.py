@@ -67,7 +67,6 @@ class Liggghts(Engine):
                                     "spring (same stiffness and limit as rolling, no separate mu_tor)",
         },
         "membrane": {
-            "servo_ring_walls": "a stack of independently servo-controlled cylindrical ring walls",
             "shell_pressure": "radial forces p·(band envelope area)·r_i²/Σr_j² on the outer shell of grains of "
                               "each horizontal band, recomputed during the run (scenes/triaxial.py)",
         },
