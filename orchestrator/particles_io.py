@@ -34,3 +34,15 @@ def read_particle_table(path) -> dict:
     a = np.loadtxt(path, ndmin=2)
     return {"id": a[:, 0].astype(np.int64), "radius": a[:, 1], "density": a[:, 2],
             "position": a[:, 3:6], "velocity": a[:, 6:9]}
+
+
+def ensure_particle_table(run_dir, case, sample) -> Path:
+    """``run_dir/particles.txt``, written from ``sample()`` (a dict with id, radius, position) unless
+    it exists already (a resumed run, or a packing given by the case); engine adapters derive
+    their own input from it (LIGGGHTS' read_data file is written by its adapter)."""
+    table = Path(run_dir) / "particles.txt"
+    if not table.exists():
+        parts = sample()
+        write_particle_table(table, parts["id"], parts["radius"], case.material.density, parts["position"],
+                             parts.get("velocity"))
+    return table

@@ -257,16 +257,8 @@ def sample_particles(case, params) -> dict:
 
 
 def prepare(case, params, run_dir) -> dict:
-    from ..particles_io import write_particle_table
-    run_dir = Path(run_dir)
-    table = run_dir / "particles.txt"
-    if not table.exists():
-        parts = sample_particles(case, params)
-        write_particle_table(table, parts["id"], parts["radius"], case.material.density, parts["position"])
-    data = run_dir / "particles.data"
-    if not data.exists():
-        from engines.liggghts import write_data_file
-        write_data_file(data, table, params["scene"]["box_lo"], params["scene"]["box_hi"])
+    from ..particles_io import ensure_particle_table
+    table = ensure_particle_table(run_dir, case, lambda: sample_particles(case, params))
     return {"particles": str(table)}
 
 

@@ -424,7 +424,7 @@ def sample_particles(case, params) -> dict:
 def prepare(case, params, run_dir) -> dict:
     """Write particles.txt (and LIGGGHTS' particles.data) and the three STL meshes."""
     from ..geometry import write_stl
-    from ..particles_io import write_particle_table
+    from ..particles_io import ensure_particle_table
     run_dir = Path(run_dir)
     files = {}
     meshes = build_meshes(case, params)
@@ -432,14 +432,7 @@ def prepare(case, params, run_dir) -> dict:
         p = run_dir / f"{name}.stl"
         write_stl(m, p, name)
         files[name] = str(p)
-    table = run_dir / "particles.txt"
-    if not table.exists():
-        parts = sample_particles(case, params)
-        write_particle_table(table, parts["id"], parts["radius"], case.material.density, parts["position"])
-    data = run_dir / "particles.data"
-    if not data.exists():
-        from engines.liggghts import write_data_file
-        write_data_file(data, table, params["scene"]["box_lo"], params["scene"]["box_hi"])
+    table = ensure_particle_table(run_dir, case, lambda: sample_particles(case, params))
     files["particles"] = str(table)
     return files
 
