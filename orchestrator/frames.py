@@ -115,10 +115,13 @@ class FrameWriter:
         fr.create_dataset("step", shape=(0,), maxshape=(None,), dtype="i8", chunks=(1024,))
         for c in self.controls:
             fr.create_dataset(c, shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+        # chunks of ~64 K values: one frame for large systems, many frames for small ones (a chunk
+        # per tiny frame makes HDF5's per-chunk overhead dominate)
+        t_chunk = int(max(1, min(1024, 65536 // max(self.n * 3, 1))))
         for f in self.fields:
             tail = PER_PARTICLE_FIELDS[f]
             fr.create_dataset(f, shape=(0, self.n) + tail, maxshape=(None, self.n) + tail,
-                              dtype="f8", chunks=(1, max(self.n, 1)) + tail, fillvalue=np.nan)
+                              dtype="f8", chunks=(t_chunk, max(self.n, 1)) + tail, fillvalue=np.nan)
         self.h5.create_group("contacts")
         self.h5.create_group("walls")
         m = self.h5.create_group("meta")
