@@ -40,7 +40,6 @@ def test_notebook_runs(name, crossval_smoke, runs_root, tmp_path):
     assert images >= 2, f"{name}: expected plots in the outputs"
 
 
-@pytest.mark.slow
 def test_triaxial_notebook_runs(runs_root, tmp_path, engines_installed):
     _execute("triaxial_postprocessing.ipynb", runs_root, tmp_path, timeout=1800)
 
