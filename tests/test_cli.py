@@ -81,3 +81,18 @@ def test_vtk_export_of_a_run(runs_root, engines_installed):
     run = next(Path(runs_root).glob("chung_ooi_1_sphere_sphere_glass/yade-*"))
     out = cli("vtk", run, "--frame", "0")
     assert out.returncode == 0 and (run / "vtk" / "frame_00000.vtu").exists()
+
+
+@pytest.mark.engine
+def test_crossval_command_writes_table_report_and_wall_times(tmp_path, engines_installed):
+    out = cli("crossval", VER / "chung_ooi_1_sphere_sphere_glass.yaml", "--runs", tmp_path,
+              "--measure", "displacements", "--states", "ends")
+    assert out.returncode == 0, out.stderr[-2000:]
+    d = tmp_path / "chung_ooi_1_sphere_sphere_glass" / "crossval"
+    for name in ("comparison.csv", "report.html", "wall_times.csv", "grains.csv"):
+        assert (d / name).stat().st_size > 0, name
+    import pandas as pd
+    wt = pd.read_csv(d / "wall_times.csv")
+    assert {"liggghts", "yade"} <= set(wt.iloc[:, 0].astype(str)) | set(wt.columns)
+    g = pd.read_csv(d / "grains.csv")
+    assert len(g) >= 1
