@@ -217,7 +217,7 @@ def test_single_contact_substitutes_vs_seed():
 def smoke_runs(tmp_path_factory):
     from orchestrator.runner import run_case
     if not ENGINES:
-        pytest.skip("neither liggghts nor yade is installed")
+        pytest.fail("neither liggghts nor yade is installed; run `bash .ci/setup`")
     root = tmp_path_factory.mktemp("shear_runs")
     case = load_case(SMOKE)
     return case, {e: run_case(case, e, runs_root=root, progress=False) for e in ENGINES}
@@ -227,7 +227,7 @@ def smoke_runs(tmp_path_factory):
 def test_smoke_protocol(smoke_runs, engine):
     case, runs = smoke_runs
     if engine not in runs:
-        pytest.skip(f"{engine} not installed")
+        pytest.fail(f"{engine} not installed; run `bash .ci/setup`")
     out = runs[engine]
     assert out.status == "complete"
     params = json.loads((out.run_dir / "params.json").read_text())
@@ -280,7 +280,7 @@ def _measured_rotation(a0, a1):
 def test_smoke_rotating_parts_turned_by_requested_angle(smoke_runs, engine):
     case, runs = smoke_runs
     if engine not in runs:
-        pytest.skip(f"{engine} not installed")
+        pytest.fail(f"{engine} not installed; run `bash .ci/setup`")
     d = runs[engine].run_dir
     want = case.scene.final_angle
     params = json.loads((d / "params.json").read_text())
@@ -306,7 +306,7 @@ def test_smoke_rotating_parts_turned_by_requested_angle(smoke_runs, engine):
 def test_smoke_both_engines_start_identical(smoke_runs):
     case, runs = smoke_runs
     if len(runs) < 2:
-        pytest.skip("needs both engines")
+        pytest.fail("needs both engines; run `bash .ci/setup`")
     tabs = [np.loadtxt(runs[e].run_dir / "particles.txt") for e in ("liggghts", "yade")]
     assert np.array_equal(tabs[0], tabs[1])
     with h5py.File(runs["liggghts"].run_dir / "frames.h5") as a, h5py.File(runs["yade"].run_dir / "frames.h5") as b:

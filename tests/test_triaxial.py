@@ -37,7 +37,7 @@ _CACHE: dict = {}
 def outcome(runs, eng):
     if eng not in _CACHE:
         if shutil.which(eng) is None:
-            pytest.skip(f"{eng} is not installed")
+            pytest.fail(f"{eng} is not installed; run `bash .ci/setup`")
         _CACHE[eng] = runs["run"](eng)
     return _CACHE[eng]
 
