@@ -30,6 +30,16 @@ class CaseError(ValueError):
         super().__init__(f"{self.path}: {len(problems)} problem(s) in the case file:\n{lines}")
 
 
+def positive(*names: str):
+    """A pydantic field validator refusing zero or negative values of the fields ``names``
+    (quantities are SI by then): ``_positive = positive("radius", "speed")`` in a model."""
+    def check(cls, v, info):
+        if v is not None and v <= 0:
+            raise ValueError(f"{info.field_name} must be positive, got {v:g} (SI)")
+        return v
+    return field_validator(*names)(check)
+
+
 class Strict(BaseModel):
     """Base of every case section: unknown keys are errors."""
     model_config = ConfigDict(extra="forbid", validate_default=True)
@@ -44,12 +54,7 @@ class Material(Strict):
     youngs_modulus: Pressure
     poisson_ratio: float
 
-    @field_validator("density", "youngs_modulus")
-    @classmethod
-    def _positive(cls, v, info):
-        if v <= 0:
-            raise ValueError(f"{info.field_name} must be positive, got {v:g} (SI)")
-        return v
+    _positive = positive("density", "youngs_modulus")
 
     @field_validator("poisson_ratio")
     @classmethod

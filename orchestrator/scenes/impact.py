@@ -13,7 +13,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from ..case import Strict
+from ..case import Strict, positive
 from ..derive import YADE_PLANE_SPHERE_FACTOR, hertz_contact_time
 from ..units import Angle, Length, Velocity
 
@@ -30,12 +30,7 @@ class Scene(Strict):
     after_contact: float = Field(1.0, gt=0, description="simulated time after contact ends, in contact times")
     frames_per_contact: int = Field(400, ge=1, description="frames written per Hertz contact time")
 
-    @field_validator("radius", "speed")
-    @classmethod
-    def _pos(cls, v, info):
-        if v <= 0:
-            raise ValueError(f"{info.field_name} must be positive, got {v:g} (SI)")
-        return v
+    _pos = positive("radius", "speed")
 
     @field_validator("angles")
     @classmethod

@@ -30,7 +30,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from ..case import Strict
+from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError
 from ..units import Pressure
 from .shear_cell import PSD
@@ -57,12 +57,7 @@ class Scene(Strict):
     shear_frames: int = Field(4, ge=1, description="frames written during shear")
     wall_grain_diameter: float = Field(1.0, gt=0, description="wall grain diameter in median diameters")
 
-    @field_validator("normal_stress")
-    @classmethod
-    def _pos(cls, v):
-        if v <= 0:
-            raise ValueError(f"normal_stress must be positive, got {v:g} Pa")
-        return v
+    _pos = positive("normal_stress")
 
 
 def size_range(case) -> tuple[float, float]:

@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from ..case import Strict
+from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
 from ..units import Angle, AngularVelocity, Length, Pressure
 
@@ -105,13 +105,8 @@ class Scene(Strict):
     wall_adhesion: bool = Field(False, description="seed §3.3: particle-wall contacts use the visco-elastic part "
                                                    "of eq. 1 only (no adhesion)")
 
-    @field_validator("cell_diameter", "gap", "vane_thickness", "plate_thickness", "fill_height", "normal_stress",
+    _pos = positive("cell_diameter", "gap", "vane_thickness", "plate_thickness", "fill_height", "normal_stress",
                      "final_angle")
-    @classmethod
-    def _pos(cls, v, info):
-        if v <= 0:
-            raise ValueError(f"{info.field_name} must be positive, got {v:g} (SI)")
-        return v
 
     @model_validator(mode="after")
     def _check(self):

@@ -50,7 +50,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from ..case import Strict
+from ..case import Strict, positive
 from ..units import Length, Pressure
 
 #: per-frame controls written to frames.h5 (see module docstring)
@@ -202,12 +202,7 @@ class Scene(Strict):
     frames: int = Field(20, ge=2, description="frames written during axial loading")
     series_every: int | None = Field(None, ge=1, description="steps between time-series rows (None: derived)")
 
-    @field_validator("diameter", "height", "confining_pressure")
-    @classmethod
-    def _pos(cls, v, info):
-        if v <= 0:
-            raise ValueError(f"{info.field_name} must be positive, got {v:g} (SI)")
-        return v
+    _pos = positive("diameter", "height", "confining_pressure")
 
 
 # ---------------------------------------------------------------------------------------------
