@@ -83,7 +83,11 @@ class LocalExecutor(Executor):
             yield from SerialExecutor().run(fn, tasks)
             return
         import multiprocessing as mp
-        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
+        # forkserver: workers fork from a clean server that has imported the runner once, instead of
+        # each spawned worker importing numpy/scipy/h5py/pydantic again (seconds per short run)
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["orchestrator.runner", "orchestrator.stability.sweep"])
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
         futs = {self.pool.submit(fn, t): k for k, t in enumerate(tasks)}
         for f in as_completed(futs):
             k = futs[f]
