@@ -367,43 +367,6 @@ def _deck_beside(log: Path):
     return None
 
 
-def read_dump_frames(path):
-    """Yield (step, column names, (n, k) array) for every snapshot of a multi-frame ``dump
-    custom`` file, in step order. A step written twice (a resumed run appends from its restart
-    step) is taken from its last occurrence. All bodies are parsed in one pass."""
-    raw = Path(path).read_bytes()
-    parts = raw.split(b"ITEM: TIMESTEP\n")[1:]
-    heads, bodies = [], []
-    for part in parts:
-        lines = part.split(b"\n", 8)
-        if len(lines) < 9:
-            continue                                   # a snapshot cut short by a kill
-        step, n = int(lines[0]), int(lines[2])
-        cols = lines[7].decode().split()[2:]
-        body = lines[8]
-        if body.count(b"\n") < n:
-            continue
-        heads.append((step, n, cols))
-        bodies.append(body)
-    if not heads:
-        return
-    ncols = len(heads[0][2])
-    if all(h[2] == heads[0][2] for h in heads):
-        allv = _parse_numbers(b"".join(b if b.endswith(b"\n") else b + b"\n" for b in bodies), ncols)
-        offsets = np.cumsum([0] + [h[1] for h in heads])
-        if allv.shape[0] != offsets[-1]:
-            raise EngineError(f"{path}: {allv.shape[0]} rows for {offsets[-1]} atoms in {len(heads)} snapshots")
-        arrays = [allv[offsets[k]:offsets[k + 1]] for k in range(len(heads))]
-    else:
-        arrays = [_parse_numbers(b, len(h[2])) for h, b in zip(heads, bodies)]
-    last = {}
-    for k, h in enumerate(heads):
-        last[h[0]] = k
-    for step in sorted(last):
-        k = last[step]
-        yield step, heads[k][2], arrays[k]
-
-
 def _parse_numbers(body: bytes, ncols: int) -> np.ndarray:
     """Whitespace-separated numbers -> (rows, ncols) float64, exactly (round trip)."""
     if len(body) < 200_000:                         # small: a plain split is fastest

@@ -427,7 +427,6 @@ class Frames:
 
     def contacts(self, k: int):
         """Contacts of frame k as a DataFrame (i, j, point, normal, fn, ft split into x/y/z)."""
-        import pandas as pd
         k = range(self.n_frames)[k]
         with h5py.File(self.path, "r") as h:
             if str(k) not in h["contacts"]:

@@ -89,11 +89,12 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     return DEFAULT_STARTUP[engine_name] + steps * max(n, 1) / (tp[engine_name] * ranks)
 
 
-def prepare(case: Case, engine_name: str, run_dir: Path) -> tuple[dict, list]:
-    """Derive parameters, check capabilities, write case/params/particles. Returns (params, subs)."""
+def prepare(case: Case, engine_name: str, run_dir: Path, params: dict | None = None) -> tuple[dict, list]:
+    """Derive parameters (unless given), check capabilities, write case/params/particles.
+    Returns (params, subs)."""
     from .scenes import scene_module
     eng = get_engine(engine_name)
-    params = derive(case)
+    params = derive(case) if params is None else params
     subs = eng.check(params["features"], case.contact.substitutes)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
@@ -121,7 +122,8 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
         raise EngineError(f"{engine_name} is not installed (no '{eng.executable}' on PATH); "
                           "run the README's set-up command")
     version = eng.version()
-    run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, derive(case))}"
+    params = derive(case)
+    run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, params)}"
     old = read_summary(run_dir)
     if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
         if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
@@ -138,7 +140,7 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
         shutil.rmtree(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     with _RunLock(run_dir):
-        return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze)
+        return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
 
 
 class _RunLock:
@@ -163,18 +165,15 @@ class _RunLock:
         self.fh.close()
 
 
-def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze) -> RunOutcome:
+def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params) -> RunOutcome:
     timings = {}
     t0 = time.perf_counter()
-    params, subs = prepare(case, engine_name, run_dir)
+    params, subs = prepare(case, engine_name, run_dir, params)
     prior = read_summary(run_dir) or {}
     resume = None if dry_run or prior.get("status") not in ("running", "failed") else eng.resume_state(run_dir)
     if resume and hasattr(eng, "prepare_resume"):
         eng.prepare_resume(run_dir, resume)
     deck = eng.render(case, params, run_dir, resume=resume)
-    if resume is None:
-        # a fresh run also gets the fresh deck rendered as deck.in/script.py for reference
-        pass
     timings["render"] = time.perf_counter() - t0
     estimate = estimate_wall_time(case, params, engine_name)
     summary = {

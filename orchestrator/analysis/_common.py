@@ -182,6 +182,16 @@ def atomic_savefig(fig, path, dpi: int = 120) -> Path:
     return path
 
 
+def save_figure(fig, path, dpi: int = 120) -> Path:
+    """Save ``fig`` atomically as PNG (creating the folder) and close it; returns the path."""
+    import matplotlib.pyplot as plt
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_savefig(fig, path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
 def atomic_write_json(obj, path) -> Path:
     path = Path(path)
     tmp = _tmp_in(path, ".json")

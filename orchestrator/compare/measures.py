@@ -29,7 +29,6 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import pandas as pd
 
 from ..analysis import ANALYSES
 from ..analysis.plots import _fig
@@ -193,13 +192,23 @@ def _per_pair_samples(c, o, name, res_a, res_b, table, columns, unit=""):
     return ga, gb, last
 
 
+def _run_pairs(c: _Ctx, o: MeasureOutcome, name: str, opts, shared=()):
+    """Run analysis ``name`` on both sides over their aligned frame pairs. Options resolved on A
+    (``shared``, e.g. the D²min cutoff from A's d50) are handed to B so both are measured alike."""
+    ra = ANALYSES[name](c.fa, pairs=c.pairs_a, **opts)
+    ob = dict(opts)
+    for key in shared:
+        ob.setdefault(key, ra.options[key])
+    rb = ANALYSES[name](c.fb, pairs=c.pairs_b, **ob)
+    o.result_a, o.result_b = ra, rb
+    return ra, rb
+
+
 def _displacements(c: _Ctx, o: MeasureOutcome, opts):
     if not c.pairs_a:
         o.skipped = "needs at least two aligned states"
         return
-    ra = ANALYSES["displacements"](c.fa, pairs=c.pairs_a, **opts)
-    rb = ANALYSES["displacements"](c.fb, pairs=c.pairs_b, **opts)
-    o.result_a, o.result_b = ra, rb
+    ra, rb = _run_pairs(c, o, "displacements", opts)
     ga, gb, last = _per_pair_samples(c, o, "displacements", ra, rb, "particles", ["u"], "m")
     for k in range(len(c.pairs_a)):
         if k in ga and k in gb:
@@ -217,11 +226,7 @@ def _d2min(c: _Ctx, o: MeasureOutcome, opts):
     if not c.pairs_a:
         o.skipped = "needs at least two aligned states"
         return
-    ra = ANALYSES["d2min"](c.fa, pairs=c.pairs_a, **opts)
-    ob = dict(opts)
-    ob.setdefault("cutoff", ra.options["cutoff"])
-    rb = ANALYSES["d2min"](c.fb, pairs=c.pairs_b, **ob)
-    o.result_a, o.result_b = ra, rb
+    ra, rb = _run_pairs(c, o, "d2min", opts, shared=("cutoff",))
     ga, gb, last = _per_pair_samples(c, o, "d2min", ra, rb, "particles", ["d2min", "eps_q"])
     curves = []
     if last is not None:
@@ -239,11 +244,7 @@ def _clusters(c: _Ctx, o: MeasureOutcome, opts):
         return
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ra = ANALYSES["clusters"](c.fa, pairs=c.pairs_a, **opts)
-        ob = dict(opts)
-        ob.setdefault("cutoff", ra.options["cutoff"])
-        rb = ANALYSES["clusters"](c.fb, pairs=c.pairs_b, **ob)
-    o.result_a, o.result_b = ra, rb
+        ra, rb = _run_pairs(c, o, "clusters", opts, shared=("cutoff",))
     o.rows.append(c.row("clusters", "cluster size s (pooled)", ks(ra.tables["clusters"]["size"], rb.tables["clusters"]["size"])))
     for q in ("tau", "d_f"):
         o.rows.append(c.row("clusters", q, rel_error(ra.scalars.get(q, np.nan), rb.scalars.get(q, np.nan))))

@@ -114,9 +114,5 @@ def plot_calibration(df, fits, target, inv, path):
     ax.set_ylabel("steady-state mu_macro = |F_x|/|F_z| [-]")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    from ..analysis._common import atomic_savefig
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_savefig(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    from ..analysis._common import save_figure
+    return save_figure(fig, path)

@@ -205,9 +205,5 @@ def plot_ladder(df, knob: str, path, target_error: float):
     ax.set_title(f"error against run time, knob {knob} (reference = finest)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    from ..analysis._common import atomic_savefig
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_savefig(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    from ..analysis._common import save_figure
+    return save_figure(fig, path)
