@@ -8,7 +8,6 @@ Render: ``templates/liggghts/<scene>.in.j2`` with the derived parameters; partic
 """
 from __future__ import annotations
 
-import functools
 import json
 import re
 import subprocess
@@ -23,6 +22,9 @@ from .render import render_template
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
+
+#: engine version per (adapter, executable), probed once per process
+_VERSIONS: dict = {}
 
 class Liggghts(Engine):
     name = "liggghts"
@@ -72,8 +74,15 @@ class Liggghts(Engine):
         },
     }
 
-    @functools.lru_cache(maxsize=1)
     def version(self) -> str:
+        # cached per executable in the process: get_engine() makes a new adapter every call, so a
+        # per-instance cache missed and every run_dir_for/run_case paid a ~0.5 s engine start-up
+        key = (type(self).__name__, self.executable)
+        if key not in _VERSIONS:
+            _VERSIONS[key] = self._probe_version()
+        return _VERSIONS[key]
+
+    def _probe_version(self) -> str:
         try:
             import tempfile
             with tempfile.TemporaryDirectory() as tmp:   # `liggghts -h` leaves a log.liggghts behind

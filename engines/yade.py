@@ -7,7 +7,6 @@ written by ``O.save`` (atomic rename) and reloaded with ``O.load``.
 """
 from __future__ import annotations
 
-import functools
 import re
 import subprocess
 from pathlib import Path
@@ -19,6 +18,9 @@ from .render import render_template
 
 _PROGRESS = re.compile(r"^PROGRESS (\d+)")
 
+
+#: engine version per (adapter, executable), probed once per process
+_VERSIONS: dict = {}
 
 class Yade(Engine):
     name = "yade"
@@ -56,8 +58,15 @@ class Yade(Engine):
         },
     }
 
-    @functools.lru_cache(maxsize=1)
     def version(self) -> str:
+        # cached per executable in the process: get_engine() makes a new adapter every call, so a
+        # per-instance cache missed and every run_dir_for/run_case paid a ~0.5 s engine start-up
+        key = (type(self).__name__, self.executable)
+        if key not in _VERSIONS:
+            _VERSIONS[key] = self._probe_version()
+        return _VERSIONS[key]
+
+    def _probe_version(self) -> str:
         try:
             out = subprocess.run([self.executable, "--version"], capture_output=True, text=True, timeout=60).stdout
         except (OSError, subprocess.TimeoutExpired) as exc:

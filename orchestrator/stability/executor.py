@@ -71,6 +71,28 @@ class SerialExecutor(Executor):
             yield k, fn(t)
 
 
+def warm_worker(case_path=None, engines=(), overrides=None) -> None:
+    """Pay a worker process's one-off costs before its first run: the engines' version probes
+    (a LIGGGHTS start-up is ~0.5 s) and the case's derivation (the restitution inversion is
+    cached per process). Errors are left to the runs themselves."""
+    try:
+        from engines import get_engine
+        for e in engines or ():
+            eng = get_engine(e)
+            if eng.available():
+                eng.version()
+        if case_path is not None:
+            from ..case import load_case
+            from ..derive import derive
+            derive(load_case(case_path, overrides=overrides or None))
+    except Exception:
+        pass
+
+
+def _noop():
+    return None
+
+
 class LocalExecutor(Executor):
     """A pool of local processes, one task per core by default."""
 
@@ -78,17 +100,31 @@ class LocalExecutor(Executor):
         self.workers = workers or os.cpu_count() or 1
         self.pool = None
 
-    def run(self, fn, tasks):
-        if self.workers == 1:
-            yield from SerialExecutor().run(fn, tasks)
+    def start(self, case_path=None, engines=(), overrides=None) -> None:
+        """Start the worker processes now (they warm up with :func:`warm_worker`) so that their
+        start-up overlaps the caller's own work (a sweep plans its runs meanwhile)."""
+        if self.workers == 1 or self.pool is not None:
             return
         import multiprocessing as mp
         # forkserver: workers fork from a clean server that has imported the runner once, instead of
         # each spawned worker importing numpy/scipy/h5py/pydantic again (seconds per short run)
         ctx = mp.get_context("forkserver")
         ctx.set_forkserver_preload(["orchestrator.runner", "orchestrator.stability.sweep"])
-        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
-        futs = {self.pool.submit(fn, t): k for k, t in enumerate(tasks)}
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=warm_worker,
+                                        initargs=(str(case_path) if case_path else None, tuple(engines or ()),
+                                                  overrides))
+        for _ in range(self.workers):                  # the pool spawns a worker per submit, up to max
+            self.pool.submit(_noop)
+
+    def run(self, fn, tasks):
+        if self.workers == 1:
+            yield from SerialExecutor().run(fn, tasks)
+            return
+        futs = {}
+        for k, t in enumerate(tasks):                  # tasks may be a generator: submitted as they come
+            if self.pool is None:                      # workers start (and warm up) with the first task
+                self.start(t.get("case"), [t["engine"]] if t.get("engine") else (), t.get("overrides"))
+            futs[self.pool.submit(fn, t)] = k
         for f in as_completed(futs):
             k = futs[f]
             try:

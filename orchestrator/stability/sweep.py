@@ -56,25 +56,27 @@ def nested(point: dict) -> dict:
 
 def plan(case_path, pts: list[dict], engines: list[str], runs_root) -> list[dict]:
     """Tasks with their run directory (hash) and whether a finished run already exists."""
-    from ..case import load_case
+    return [t for pt in pts for t in plan_point(case_path, pt, engines, runs_root)]
+
+
+def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]:
+    """The tasks of one point (one per engine); an invalid point gives tasks marked ``invalid``."""
+    from ..case import CaseError, load_case
     from ..runner import read_summary, run_dir_for
+    ov = nested(pt)
+    try:
+        case = load_case(case_path, overrides=ov)
+    except CaseError as exc:                 # an invalid point fails alone, the others still run
+        return [{"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
+                 "point": pt, "run_dir": None, "run_id": None, "done": False, "invalid": str(exc)}
+                for eng in (engines or ["?"])]
     tasks = []
-    from ..case import CaseError
-    for pt in pts:
-        ov = nested(pt)
-        try:
-            case = load_case(case_path, overrides=ov)
-        except CaseError as exc:                 # an invalid point fails alone, the others still run
-            for eng in (engines or ["?"]):
-                tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
-                              "point": pt, "run_dir": None, "run_id": None, "done": False, "invalid": str(exc)})
-            continue
-        for eng in (engines or case.engines):
-            rd = run_dir_for(case, eng, runs_root)
-            s = read_summary(rd) or {}
-            done = (s.get("status") == "complete" and (rd / "frames.h5").exists()) or s.get("status") == "unstable"
-            tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
-                          "point": pt, "run_dir": str(rd), "run_id": rd.name, "done": done})
+    for eng in (engines or case.engines):
+        rd = run_dir_for(case, eng, runs_root)
+        s = read_summary(rd) or {}
+        done = (s.get("status") == "complete" and (rd / "frames.h5").exists()) or s.get("status") == "unstable"
+        tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
+                      "point": pt, "run_dir": str(rd), "run_id": rd.name, "done": done})
     return tasks
 
 
@@ -107,7 +109,6 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
     if isinstance(sets, list):
         sets = parse_sets(sets)
     pts = points(sets, grid)
-    tasks = plan(case_path, pts, engines, runs_root)
     sid = hashlib.sha256(json.dumps([str(case_path), sets, grid, engines], sort_keys=True, default=str)
                          .encode()).hexdigest()[:10]
     from ..case import load_case
@@ -115,7 +116,8 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
     out_dir = Path(runs_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)
     out_json = out_dir / f"sweep-{sid}.json"
-    results: list[dict | None] = [None] * len(tasks)
+    tasks: list[dict] = []
+    results: list[dict | None] = []
     t0 = time.perf_counter()
 
     def record(k, res):
@@ -124,23 +126,31 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
             on_result(tasks[k], res)
         _write(out_json, tasks, results, sets, grid, time.perf_counter() - t0)
 
-    todo = []
-    for k, t in enumerate(tasks):
-        if t.get("invalid"):
-            record(k, {"status": "failed", "error": t["invalid"]})
-        elif t["done"] and not force:
-            record(k, _finished(t))
-        else:
-            todo.append(k)
-    if todo:
-        ex = executor or get_executor(scheduler, workers)
-        try:
-            sub = [dict(tasks[k], force=force) for k in todo]
-            for j, res in ex.run(run_task, sub):
-                record(todo[j], res)
-        finally:
-            if executor is None:
-                ex.close()
+    todo: list[int] = []
+
+    def to_run():
+        """Plans point after point and hands the runs to do to the executor as they are found, so
+        that the first runs start (and the workers warm up) while the rest is being planned."""
+        for pt in pts:
+            for t in plan_point(case_path, pt, engines, runs_root):
+                k = len(tasks)
+                tasks.append(t)
+                results.append(None)
+                if t.get("invalid"):
+                    record(k, {"status": "failed", "error": t["invalid"]})
+                elif t["done"] and not force:
+                    record(k, _finished(t))
+                else:
+                    todo.append(k)
+                    yield dict(t, force=force)
+
+    ex = executor or get_executor(scheduler, workers)
+    try:
+        for j, res in ex.run(run_task, to_run()):
+            record(todo[j], res)
+    finally:
+        if executor is None:
+            ex.close()
     _write(out_json, tasks, results, sets, grid, time.perf_counter() - t0)
     return table(tasks, results)
 
