@@ -31,45 +31,76 @@ def test_fit_reconstruct_and_invariants_exact():
         shape.sh_fit(th[:100], ph[:100], r[:100])
 
 
-@pytest.fixture(scope="module")
-def irregular():
-    """150 irregular grains (SH degree 15, ~14 voxels across), not touching, in a 128^3 scan; the next
-    scan moves them by up to ~0.6 d50 and turns each by a random rotation."""
-    rng = np.random.default_rng(7)
+def _render_measure(coefs, positions, rotations, noise, seed):
+    """Render the grains (one scan per frame), segment, measure the SH invariants; returns per scan
+    the grain table (with R0..R15) and the index of the true grain of each row (-1: none within 3 voxels)."""
+    L = 128
+    scans = synth.render_sequence((L, L, L), VS, positions, grain_shapes=coefs, rotations=rotations,
+                                  supersample=3, noise=noise, seed=seed)
+    out = []
+    for sc, p in zip(scans, positions):
+        seg = segment.segment(sc)
+        tab, _ = shape.grain_shapes(seg)
+        g = seg.grains.merge(tab, on="label")
+        d, k = cKDTree(p).query(g[["x", "y", "z"]].to_numpy())
+        out.append((g, np.where(d < 3 * VS, k, -1)))
+    return out
+
+
+def _grain_set():
+    """150 irregular grains (SH degree 15, ~14 voxels across) placed without contact in a 128^3 scan."""
     n, L = 150, 128
     coefs = synth.random_sh_grains(n, 7 * VS, seed=8)
     rmax = np.array([synth._GridRadial(c, 15).rmax for c in coefs])
     box = ((VS,) * 3, ((L - 1) * VS,) * 3)
     p0 = synth.pack_spheres(rmax + VS, box=box, seed=9)
+    return coefs, rmax, box, p0
+
+
+@pytest.fixture(scope="module")
+def irregular():
+    """The 150 grains in three scans with noise 8 % of the contrast: scan 1 moves them by up to
+    ~0.9 d50 and turns each by a random rotation; scan 2 repeats scan 0 (same positions and
+    orientations) with a new noise realisation."""
+    rng = np.random.default_rng(7)
+    coefs, rmax, box, p0 = _grain_set()
+    n, L = len(coefs), 128
     d50 = 2 * np.median([abs(c[0, 15]) / np.sqrt(4 * np.pi) for c in coefs])
     p1 = p0 + 0.5 * d50 * np.sin(p0 / (L * VS) * np.pi)[:, [1, 2, 0]] + rng.normal(0, 0.05 * d50, p0.shape)
     p1 = np.clip(p1, (rmax + 2 * VS)[:, None], (L - 2) * VS - rmax[:, None])
     p1 = synth.pack_spheres(rmax + VS, box=box, initial=p1)
     R0 = Rot.random(n, random_state=10).as_matrix()
     R1 = np.einsum("nij,njk->nik", Rot.random(n, random_state=11).as_matrix(), R0)
-    scans = synth.render_sequence((L, L, L), VS, np.stack([p0, p1]), grain_shapes=coefs,
-                                  rotations=np.stack([R0, R1]), supersample=3, noise=0.08)
-    out = []
-    for sc, p in zip(scans, (p0, p1)):
-        seg = segment.segment(sc)
-        tab, _ = shape.grain_shapes(seg)
-        g = seg.grains.merge(tab, on="label")
-        d, k = cKDTree(p).query(g[["x", "y", "z"]].to_numpy())
-        out.append((g, np.where(d < 3 * VS, k, -1)))
+    out = _render_measure(coefs, np.stack([p0, p1, p0]), np.stack([R0, R1, R0]), 0.08, 0)
     return dict(out=out, d50=d50, n=n, p0=p0, p1=p1)
 
 
-def _invariant_change_and_difference(irregular):
-    (ga, ka), (gb, kb) = irregular["out"]
-    cols = [f"R{n}" for n in range(16)]
-    assert (ka >= 0).all() and len(np.unique(ka)) == irregular["n"]
-    ia = ga[cols].to_numpy()[np.argsort(ka)]
-    ib = gb[cols].to_numpy()[np.argsort(kb)]
-    change = np.linalg.norm(ia - ib, axis=1)          # same grain, rotated and moved
+@pytest.fixture(scope="module")
+def rotated_clean():
+    """The same 150 grains, each at three random orientations (one scan each), rendered with partial
+    volume and the PSF blur but no noise: what rotation alone does to the measured invariants."""
+    coefs, rmax, box, p0 = _grain_set()
+    rot = np.stack([Rot.random(len(coefs), random_state=20 + t).as_matrix() for t in range(3)])
+    return _render_measure(coefs, np.stack([p0] * 3), rot, 0.0, 0)
+
+
+_COLS = [f"R{n}" for n in range(16)]
+
+
+def _by_true_grain(g, k, n):
+    assert (k >= 0).all() and len(np.unique(k)) == n
+    return g[_COLS].to_numpy()[np.argsort(k)]
+
+
+def _invariant_change_and_difference(irregular, pair=(0, 1), label="rotation + noise"):
+    out, n = irregular["out"], irregular["n"]
+    ia, ib = (_by_true_grain(*out[t], n) for t in pair)
+    change = np.linalg.norm(ia - ib, axis=1)          # same grain, another scan
     differ = pdist(ia)                                # different grains
-    print(f"\ninvariants [voxels]: rotation change median {np.median(change) / VS:.3f}, max "
+    print(f"\ninvariants [voxels], {label}: change median {np.median(change) / VS:.3f}, max "
           f"{change.max() / VS:.3f}; difference between grains min {differ.min() / VS:.3f}, "
-          f"median {np.median(differ) / VS:.3f}")
+          f"median {np.median(differ) / VS:.3f} -> median/min {np.median(change) / differ.min():.2f}x, "
+          f"max/min {change.max() / differ.min():.2f}x")
     return change, differ
 
 
@@ -78,20 +109,47 @@ def test_rotation_changes_invariants_less_than_any_two_grains_differ(irregular):
     assert change.max() < differ.min()                # every rotated grain stays nearest itself
 
 
+def test_rotation_alone_changes_invariants_far_less_than_grains_differ(rotated_clean):
+    """Issue #6's floor for rotation: the same grain at three random orientations, rendered,
+    segmented and measured, changes its invariant vector by less than 0.25x the smallest difference
+    between two of the 150 grains (median), and by less than half of it at worst."""
+    n = 150
+    inv = [_by_true_grain(g, k, n) for g, k in rotated_clean]
+    change = np.concatenate([np.linalg.norm(inv[a] - inv[b], axis=1) for a, b in ((0, 1), (0, 2), (1, 2))])
+    differ = pdist(inv[0])
+    print(f"\ninvariants [voxels], rotation alone (no noise, 3 orientations): change median "
+          f"{np.median(change) / VS:.3f}, max {change.max() / VS:.3f}; difference between grains min "
+          f"{differ.min() / VS:.3f} -> median/min {np.median(change) / differ.min():.2f}x, "
+          f"max/min {change.max() / differ.min():.2f}x")
+    assert np.median(change) < 0.25 * differ.min()
+    assert change.max() < 0.5 * differ.min()
+
+
+def test_rotation_adds_nothing_beyond_scan_noise(irregular):
+    """With noise, the change between two scans of a grain is the noise's: turning the grain between
+    the scans changes the invariants no more than re-scanning it unturned (within 25 %)."""
+    turned, _ = _invariant_change_and_difference(irregular, (0, 1))
+    rescanned, _ = _invariant_change_and_difference(irregular, (0, 2), "noise alone (same orientation)")
+    assert np.median(turned) < 1.25 * np.median(rescanned)
+
+
 @pytest.mark.xfail(strict=True, reason=(
     "issue #6 asks the rotation change to be *far* below the smallest difference between grains "
-    "(here: median < 0.25x). Measured on 150 irregular grains ~12 voxels across: median change "
-    "0.069 voxel, max 0.13, smallest difference 0.17 (0.41x). The residual comes from voxelising "
-    "and segmenting the rotated grain, not from ray sampling (3x more rays changed nothing). "
-    "Strict: this fails the suite the day it passes, so the marker cannot outlive the fix."))
+    "(median < 0.25x). Without noise it is (0.08x, test above). With scan noise of 8 % of the "
+    "contrast on 150 grains ~14 voxels across, the change between two scans is the noise's: median "
+    "0.069 voxel, max 0.13, against a smallest difference of 0.17 (0.41x), and re-scanning the grain "
+    "unturned gives the same 0.070. Per SH coefficient the measurement noise (0.022 voxel) is near the "
+    "information bound of the data (~0.019 voxel: sigma_noise * sqrt(2 sqrt(pi) sigma_psf) / r), so no "
+    "surface method can take it to 0.25x at this noise and grain size. Strict: this fails the suite "
+    "the day it passes, so the marker cannot outlive a fix."))
 def test_rotation_changes_invariants_far_less_than_grains_differ(irregular):
     change, differ = _invariant_change_and_difference(irregular)
     assert np.median(change) < 0.25 * differ.min()
 
 
 def test_sh_matching_irregular_grains(irregular):
-    (ga, ka), (gb, kb) = irregular["out"]
-    cols = [f"R{n}" for n in range(16)]
+    (ga, ka), (gb, kb) = irregular["out"][:2]
+    cols = _COLS
     lk = track.match_invariants(ga[["x", "y", "z"]].to_numpy(), ga["volume"].to_numpy(), ga[cols].to_numpy(),
                                 gb[["x", "y", "z"]].to_numpy(), gb["volume"].to_numpy(), gb[cols].to_numpy(),
                                 d50=irregular["d50"])
