@@ -162,3 +162,42 @@ def test_frame_outputs(runs, eng):
         assert np.mean(np.sum(n * fn, axis=1) < 0) > 0.99
         # tangential forces lie in the contact plane (LIGGGHTS rotates its history lazily: 1e-3)
         assert np.allclose(np.sum(n * ft, axis=1), 0.0, atol=1e-3 * np.abs(fn).max())
+
+
+def test_monitor_deck_has_one_pair_local_compute(tmp_path):
+    """LIGGGHTS allows one compute pair/gran/local (checked: 'Pair gran allows only one compute of
+    type pair/local'): with contact output and monitors on, the monitors read the overlap column
+    of the contact compute, and the contact dump keeps its 18 columns."""
+    from orchestrator.runner import run_case
+    case = load_case(SMOKE)
+    assert case.output.contacts and case.stability.monitors
+    out = run_case(case, "liggghts", runs_root=tmp_path, dry_run=True, progress=False)
+    deck = (out.run_dir / "deck.in").read_text().splitlines()
+    computes = [ln for ln in deck if ln.startswith("compute") and "pair/gran/local" in ln]
+    assert len(computes) == 1 and " delta contactPoint" in computes[0], computes
+    dump = next(ln for ln in deck if ln.startswith("dump") and "contacts" in ln)
+    assert dump.count("c_pgl[") == 18 and "c_pgl[16]" not in dump
+    assert any(ln.startswith("compute") and "ORCH_dmax" in ln and "c_pgl[16]" in ln for ln in deck)
+    runs = [ln for ln in deck if ln.startswith("run") and ln.split()[1] != "0"]
+    assert runs and all(" every " in ln and "ORCH_UNSTABLE" in ln for ln in runs), runs
+    yade = run_case(case, "yade", runs_root=tmp_path, dry_run=True, progress=False)
+    assert "orch_monitor_engine()," in (yade.run_dir / "script.py").read_text()
+
+
+@pytest.mark.parametrize("eng", ENGINES)
+def test_monitors_stop_an_unstable_triaxial_run(eng, tmp_path):
+    """The stability monitors are wired into both triaxial decks: the smoke case at 6x the
+    critical time step is stopped early and marked unstable (docs/stability.md §2)."""
+    from orchestrator.derive import derive
+    from orchestrator.runner import run_case
+    if shutil.which(eng) is None:
+        pytest.fail(f"{eng} is not installed; run `bash .ci/setup`")
+    dt = 6 * derive(load_case(SMOKE))["dt_critical"]
+    case = load_case(SMOKE, overrides={"timestep": {"dt": f"{dt!r} s", "allow_unsafe": True}})
+    out = run_case(case, eng, runs_root=tmp_path, progress=False)
+    s = json.loads((out.run_dir / "summary.json").read_text())
+    assert out.status == "unstable" and s["status"] == "unstable", s.get("status")
+    u = s["unstable"]
+    assert u["figure"] in ("kinetic_energy", "overlap", "grains_outside", "nan", "wall_force", "wall_force_swing")
+    assert u["step"] < s["steps"] / 2
+    assert not (out.run_dir / "frames.h5").exists()

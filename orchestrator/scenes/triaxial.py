@@ -19,7 +19,7 @@ Lateral boundary:
 - YADE: a membrane of GridNodes/GridConnections/PFacets (yade.gridpfacet) wrapped on the sample;
   the pressure is applied as nodal forces p·A_f/3 along each facet's current inward normal,
   recomputed every ``membrane.update_every`` steps (follow-the-surface load, ``O.forces.setPermF``).
-  The membrane's end rings are tied to the platens in z and free radially.
+  The membrane extends one row beyond each platen and its ends are free.
 - LIGGGHTS-PUBLIC has no membrane. Substitute ``shell_pressure`` (named in
   ``contact.substitutes``): the sample is cut into ``lateral.bands`` horizontal bands between the
   platens; in each band the outer envelope radius R_k is the largest ρ_i + r_i of its grains, the
@@ -158,7 +158,9 @@ class Membrane(Strict):
     thickness: Length = "0.3 mm"
     density: float = Field(1000.0, gt=0, description="kg/m^3")
     friction: float = Field(0.0, ge=0, description="grain-membrane friction coefficient")
-    spacing: float = Field(1.5, gt=0.2, description="node spacing / d50")
+    spacing: float = Field(3.0, gt=0.2, description="node spacing / d50 (3: facets bridge the surface voids like the "
+                                                    "latex sheet, whose bending stiffness the GridNode mesh lacks; "
+                                                    "1.5 let the membrane sink into the voids, docs/triaxial.md)")
     node_radius: float = Field(0.15, gt=0, le=0.5, description="node (= half sheet thickness) radius / d50")
     contact_stiffness: float = Field(1.0, gt=0, description="grain-membrane kn as a multiple of the Hertz "
                                                               "tangent stiffness of a d50 grain on a flat wall at p")
@@ -168,7 +170,10 @@ class Membrane(Strict):
     correction_limit: float = Field(0.1, ge=0, lt=0.5, description="largest membrane correction |p_applied/p - 1|")
     correction_rows: int = Field(20, ge=1, description="averaging window (time-series rows) of the correction")
     correction_gain: float = Field(0.5, ge=0)
-    contact_damping: float = Field(0.3, ge=0, description="grain-membrane normal dashpot, fraction of critical")
+    contact_damping: float = Field(0.3, ge=0, description="grain-membrane normal dashpot, fraction of critical "
+                                                          "(a Python PyRunner every step: slow; 0 switches it off)")
+    node_damping: float = Field(0.0, ge=0, lt=1, description="Cundall local damping of NewtonIntegrator (C++) on the "
+                                                             "membrane nodes only; grains stay undamped (State.isDamped)")
     contact_damping_lagged: bool = Field(False, description="apply the dashpots with the pressure every update_every "
                                                             "steps (permanent forces) instead of every step: faster")
     stage2_node_drag: bool = Field(False, description="keep the stage-1 Stokes drag on the membrane nodes (only) "
@@ -201,6 +206,9 @@ class Scene(Strict):
     lateral: Lateral = Field(default_factory=Lateral)
     frames: int = Field(20, ge=2, description="frames written during axial loading")
     series_every: int | None = Field(None, ge=1, description="steps between time-series rows (None: derived)")
+    verlet_distance: float = Field(0.05, gt=0, le=1, description="YADE collider verletDist / d50: 0.3 gave ~10 "
+                                   "potential sphere-PFacet interactions per real one and made the InteractionLoop "
+                                   "the main cost")
 
     _pos = positive("diameter", "height", "confining_pressure")
 
@@ -268,6 +276,17 @@ def _sample_size_uncached(case):
     vs = float(np.sum(np.pi / 6 * d ** 3))
     k = (vs / s.packing_fraction / (np.pi / 4 * D ** 2 * H)) ** (1 / 3)
     return D * k, H * k, n, d
+
+
+def stability_inputs(case, params) -> dict:
+    """What orchestrator.stability's pre-run check and in-deck monitors need: the confining
+    pressure, the platen speeds (stage-1 servo limit, stage-2 loading), the sample height and the
+    top platen's force scale p·πD²/4 (the monitors' wall-force figure trips at
+    ``stability.wall_force_factor`` times it)."""
+    sc = params["scene"]
+    return {"wall_speeds": {"servo": sc["iso"]["v_max"], "loading": sc["strain_rate"] * sc["height"]},
+            "confining_stress": sc["pressure"], "skin": sc["skin"], "height": sc["height"],
+            "wall_force_target": sc["pressure"] * math.pi * sc["diameter"] ** 2 / 4}
 
 
 def derive(case, common: dict) -> dict:
@@ -351,10 +370,11 @@ def derive(case, common: dict) -> dict:
                      "damping": m.damping * 2 * math.sqrt(k_contact * m_node),
                      "correction_limit": m.correction_limit, "correction_rows": m.correction_rows,
                      "correction_gain": m.correction_gain, "stage2_node_drag": m.stage2_node_drag,
-                     "contact_damping": m.contact_damping, "contact_damping_lagged": m.contact_damping_lagged},
+                     "contact_damping": m.contact_damping, "node_damping": m.node_damping,
+                     "contact_damping_lagged": m.contact_damping_lagged},
         "lateral": {"bands": bands, "sectors": s.lateral.sectors, "shell": s.lateral.shell_thickness * d50,
                     "update_every": s.lateral.update_every},
-        "skin": 0.3 * d50,
+        "skin": s.verlet_distance * d50,
         "series_columns": list(SERIES_COLUMNS),
         # servo update period: the platen moves at most ~ one tenth of a d50 grain's contact
         # overlap at p per update
@@ -597,10 +617,11 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
         f_lat = _window_mean(st, s["f_lateral"], step, half)
         ctl["sigma3_hull"].append(f_lat / (2 * np.pi * np.sqrt(vh / (np.pi * H)) * H))
         ctl["stress_ratio"].append(s1 / s3 if s3 else np.nan)
-    # hull-based volumetric strain, referenced to the first shear frame (stage-2 start)
+    # hull-based volumetric strain, referenced to the same instant as the boundary one: the frame
+    # at the end of stage 1 (series row k0); referencing it to the first *shear* frame, one dump
+    # interval later, offset the two measurements by the strain of that interval
     vh = np.asarray(ctl["volume_hull"])
-    stage = np.asarray(ctl["stage"])
-    k0 = int(np.argmax(stage >= 2)) if (stage >= 2).any() else len(vh) - 1
+    k0 = int(np.argmin(np.abs(np.asarray(frame_steps, dtype=float) - st[a["k0"]])))
     ctl["volumetric_strain_hull"] = ((vh[k0] - vh) / vh[k0]).tolist()
     controls = {k: np.asarray(v, dtype=float) for k, v in ctl.items()}
     # summary numbers
