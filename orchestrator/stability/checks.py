@@ -207,9 +207,18 @@ def monitor_limits(case, params: dict, report: dict) -> dict:
     ke_scale = 0.5 * mass * v ** 2 + mass * abs(case.gravity) * inp["height"]
     ke_scale = max(ke_scale, 0.5 * mass * (1e-3 * math.sqrt(case.material.youngs_modulus / rho)) ** 2 * 1e-6)
     expected = max(c["overlap"] for c in report["contacts"].values() if "overlap" in c) / r_min
+    # The overlap figure looks for blow-up, not for accuracy: it trips above overlap_limit, raised to
+    # 4x the largest overlap the check expects from the physics (a big grain's share of the confining
+    # force on the smallest contact), up to the geometric bound 2 r_max / r_min (two of the largest
+    # grains with coinciding centres: no repulsive contact law integrated stably gets there). Soft
+    # grains under high stress (very_soft, sigma/E = 5 %) reach overlaps of 0.8-0.93 r_min in runs
+    # that are stable at every f (docs/stability.md): a fixed 0.9 flagged that physics as
+    # instability. Where the limit is raised, blow-ups are caught by the kinetic energy, NaN,
+    # grains-outside and wall-force figures (measured: docs/stability.md).
+    overlap_limit = max(o.overlap_limit, min(4 * expected, 2 * r_max / r_min))
     out = {"enabled": bool(o.monitors), "every": max(1, steps // o.monitor_checks) if steps else 1000,
            "ke_limit": o.ke_factor * ke_scale, "ke_scale": ke_scale,
-           "overlap_limit": min(0.9, max(o.overlap_limit, 4 * expected)), "r_min": r_min,
+           "overlap_limit": overlap_limit, "r_min": r_min,
            "n_particles": n, "wall_force_target": inp.get("wall_force_target"),
            "wall_force_factor": o.wall_force_factor}
     if sc.get("box_lo") is not None:
