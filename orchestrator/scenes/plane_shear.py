@@ -72,12 +72,21 @@ def required_features(case) -> list[str]:
         feats.append("sliding_friction")
     if adhesion_force(case) > 0:
         feats.append("adhesion")
-    if c.rolling is not None or c.torsion is not None:
-        raise DerivationError("contact.rolling / contact.torsion: the plane-shear scene has no rolling or twisting "
-                              "resistance yet; remove them (the shear cell has both)")
+    if _has_rolling(c):
+        feats.append("rolling_friction_load" if c.rolling.model == "seed000" else "rolling_friction")
+    if _has_torsion(c):
+        feats.append("torsion_friction")
     if c.damping != "restitution":
         raise DerivationError("contact.damping: the plane-shear scene uses 'restitution' damping")
     return feats
+
+
+def _has_rolling(c) -> bool:
+    return c.rolling is not None and (c.rolling.model == "seed000" or c.rolling.coefficient > 0)
+
+
+def _has_torsion(c) -> bool:
+    return c.torsion is not None and c.torsion.coefficient > 0
 
 
 def _mean_volume(s) -> float:
@@ -166,13 +175,37 @@ def derive(case, common: dict) -> dict:
     # contact terms
     F_adh = adhesion_force(case)
     contact = {"adhesion_force": F_adh, "restitution": dict(common["restitution"])}
+    c = case.contact
+    # overlap of a median pair (r_eff = x50/4) under the mean contact force of the packing,
+    # F_c = π x50² σ/(4 φ) + F_adh (4 contacts per grain; as scenes.shear_cell._expected_overlap)
+    r_eff = x50 / 4
+    Fc = s.normal_stress * x50 ** 2 / (s.dense_fraction * 4 / math.pi) + F_adh
+    xi = (3 * Fc / (4 * E_pp * math.sqrt(r_eff))) ** (2 / 3)
     if F_adh > 0:
-        r_eff = x50 / 4
-        Fc = s.normal_stress * x50 ** 2 / (s.dense_fraction * 4 / math.pi) + F_adh
-        xi = (3 * Fc / (4 * E_pp * math.sqrt(r_eff))) ** (2 / 3)
         contact["yade_gamma"] = F_adh / (4 * math.pi * r_eff)
         contact["liggghts_cohesion_energy_density"] = F_adh / (2 * math.pi * r_eff * xi)
         contact["expected_overlap"] = xi
+    # rolling and twisting resistance exactly as the shear cell (scenes/shear_cell.py): seed §3.2
+    # springs k_r = k_tw = k_t r_eff² with k_t = 2/7 k_n, k_n = 4/3 E* x50/2; rolling limit
+    # M = μ_r r_eff |F_n| (seed000: μ_r r_eff = √(2 r_eff ξ)); engines' stand-ins are substitutes
+    kt_seed = 2 / 7 * (4 / 3 * E_pp * x50 / 2)
+    if "liggghts" in case.engines and _has_torsion(c):
+        chosen = c.substitutes.get("liggghts.torsion_friction", c.substitutes.get("torsion_friction"))
+        if chosen not in (None, "epsd2_torsion_torque"):
+            raise DerivationError(f"contact.substitutes: the plane-shear LIGGGHTS deck implements 'torsion_friction' "
+                                  f"only as 'epsd2_torsion_torque', not '{chosen}'")
+        if not _has_rolling(c):
+            raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (epsd2 torsionTorque) needs rolling "
+                                  "friction too; add contact.rolling")
+    if _has_rolling(c):
+        mu_r = math.sqrt(2 * r_eff * xi) / r_eff if c.rolling.model == "seed000" else c.rolling.coefficient
+        contact["rolling_coefficient"] = mu_r
+        contact["yade_eta"] = mu_r * r_eff / (x50 / 2)        # YADE: M_max = eta R_mean |F_n|
+        contact["yade_krot"] = kt_seed * r_eff ** 2
+        contact["expected_overlap"] = xi
+    if _has_torsion(c):
+        contact["torsion_coefficient"] = c.torsion.coefficient
+        contact["yade_ktwist"] = kt_seed * r_eff ** 2
     return {
         "n": n_mobile + 2 * nw, "n_mobile": n_mobile, "n_wall": nw,
         "ids_mobile": [1, n_mobile], "ids_bottom": [n_mobile + 1, n_mobile + nw],
