@@ -1,6 +1,6 @@
 """CT benchmark (not a test): linking speed vs trackpy, and segmentation of a 512^3 scan on one core.
 
-    OMP_NUM_THREADS=1 python3 benchmarks/bench_ct.py [--size 512] [--skip-segment]
+    OMP_NUM_THREADS=1 python3 benchmarks/bench_ct.py [--size 512] [--skip-segment] [--cache scan512.npy]
 
 Prints the figures quoted in docs/ct.md.
 """
@@ -16,6 +16,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from orchestrator.ct import segment, synth, track
+from orchestrator.ct.io import Scan
 
 
 def bench_link(n=16000, seed=0):
@@ -53,7 +54,7 @@ def bench_link(n=16000, seed=0):
         print("trackpy not installed: no comparison")
 
 
-def bench_segment(size=512, seed=1):
+def bench_segment(size=512, seed=1, cache=None):
     vs = 1e-5
     rng = np.random.default_rng(seed)
     rr = (8.0, 12.0)
@@ -62,7 +63,12 @@ def bench_segment(size=512, seed=1):
     t0 = time.perf_counter()
     c = synth.pack_spheres(r, box=((2 * vs,) * 3, ((size - 2) * vs,) * 3), seed=seed)
     t1 = time.perf_counter()
-    scan = synth.render_scan((size,) * 3, vs, c, r, noise=0.1, psf_sigma=0.8, supersample=3)
+    if cache and os.path.exists(cache):
+        scan = Scan(np.load(cache), vs)
+    else:
+        scan = synth.render_scan((size,) * 3, vs, c, r, noise=0.1, psf_sigma=0.8, supersample=3)
+        if cache:
+            np.save(cache, scan.volume)
     t2 = time.perf_counter()
     print(f"segment: {size}^3 scan, {n} spheres {2 * rr[0]:.0f}-{2 * rr[1]:.0f} voxels across "
           f"(packing {t1 - t0:.0f} s, rendering {t2 - t1:.0f} s)")
@@ -83,7 +89,8 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--skip-segment", action="store_true")
+    ap.add_argument("--cache", help="scan .npy to reuse (written on the first run)")
     a = ap.parse_args()
     bench_link()
     if not a.skip_segment:
-        bench_segment(a.size)
+        bench_segment(a.size, cache=a.cache)

@@ -34,7 +34,7 @@ from scipy import ndimage
 
 from .io import Scan
 
-__all__ = ["segment", "Segmentation", "contacts_from_labels", "face_pairs", "grow_labels", "SegmentationError"]
+__all__ = ["segment", "Segmentation", "contacts_from_labels", "face_pairs", "grow_labels", "distance_map", "SegmentationError"]
 
 
 class SegmentationError(RuntimeError):
@@ -159,12 +159,12 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
         binary = keep[lab0]
         del lab0
         t0 = tick("pores", t0)
-        dist = ndimage.distance_transform_edt(binary).astype(np.float32)
+        dist = distance_map(binary)
         t0 = tick("distance map", t0)
         if marker_level is not None and marker_level > 0.5:
             tight = sm > np.float32(pore_level + marker_level * (solid_level - pore_level))
             tight = _fill_small_pores(tight, max_pore) & binary
-            mdist = ndimage.distance_transform_edt(tight).astype(np.float32)
+            mdist = distance_map(tight)
             del tight
         else:
             mdist = dist
@@ -188,15 +188,42 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
 
 
 def _fill_small_pores(binary, max_voxels):
-    """Fill enclosed pores (not connected to the volume border) of at most ``max_voxels`` voxels."""
-    holes = ndimage.binary_fill_holes(binary) & ~binary
-    if holes.any():
-        hl, nh = ndimage.label(holes)
-        size = np.bincount(hl.ravel())
-        small = size <= max_voxels
-        small[0] = False
-        binary = binary | small[hl]
-    return binary
+    """Fill enclosed pores (background components, 6-connected, not touching the volume border) of
+    at most ``max_voxels`` voxels. One labelling of the background (the same holes as
+    :func:`scipy.ndimage.binary_fill_holes`, without its iterated dilation from the border)."""
+    lab, n = ndimage.label(~binary)
+    if n == 0:
+        return binary
+    size = np.bincount(lab.ravel(), minlength=n + 1)
+    fill = size <= max_voxels
+    fill[0] = False
+    for ax in range(3):
+        for end in (0, -1):
+            fill[np.take(lab, end, axis=ax)] = False
+    if not fill.any():
+        return binary
+    return binary | fill[lab]
+
+
+def distance_map(binary) -> np.ndarray:
+    """Euclidean distance [voxels] of every non-zero voxel to the nearest zero voxel, float32.
+
+    The feature transform of :func:`scipy.ndimage.distance_transform_edt`; the distances are then
+    computed slab by slab in float32 (scipy's own last step builds three float64 copies of the
+    volume, which doubles its time on a 512^3 scan)."""
+    ft = ndimage.distance_transform_edt(binary, return_distances=False, return_indices=True)
+    out = np.empty(binary.shape, np.float32)
+    ny, nx = binary.shape[1:]
+    yy, xx = np.ogrid[:ny, :nx]
+    slab = 16
+    for z0 in range(0, binary.shape[0], slab):
+        z1 = min(z0 + slab, binary.shape[0])
+        zz = np.arange(z0, z1)[:, None, None]
+        d = (ft[0, z0:z1] - zz).astype(np.float32) ** 2
+        d += (ft[1, z0:z1] - yy).astype(np.float32) ** 2
+        d += (ft[2, z0:z1] - xx).astype(np.float32) ** 2
+        np.sqrt(d, out=out[z0:z1])
+    return out
 
 
 def grow_labels(labels, distance=1.5):
