@@ -138,9 +138,10 @@ def test_rotation_adds_nothing_beyond_scan_noise(irregular):
     "(median < 0.25x). Without noise it is (0.08x, test above). With scan noise of 8 % of the "
     "contrast on 150 grains ~14 voxels across, the change between two scans is the noise's: median "
     "0.069 voxel, max 0.13, against a smallest difference of 0.17 (0.41x), and re-scanning the grain "
-    "unturned gives the same 0.070. Per SH coefficient the measurement noise (0.022 voxel) is near the "
-    "information bound of the data (~0.019 voxel: sigma_noise * sqrt(2 sqrt(pi) sigma_psf) / r), so no "
-    "surface method can take it to 0.25x at this noise and grain size. Strict: this fails the suite "
+    "unturned gives the same 0.071. Per SH coefficient the measurement noise (0.02 voxel) is near the "
+    "information bound of the data (sigma_noise * sqrt(2 sqrt(pi) sigma_psf) / r ~ 0.02 voxel), so no "
+    "unbiased surface estimate reaches 0.25x at this noise and grain size (at 4 % noise the same grains "
+    "give 0.21x). Strict: this fails the suite "
     "the day it passes, so the marker cannot outlive a fix."))
 def test_rotation_changes_invariants_far_less_than_grains_differ(irregular):
     change, differ = _invariant_change_and_difference(irregular)
