@@ -22,6 +22,8 @@ Physics features (the vocabulary scenes use in ``required_features``):
 ``servo_wall``             a wall driven to a target force
 ``membrane``               flexible membrane with follow-the-surface pressure
 ``clumps``                 rigid clumps of spheres
+``placed_clumps``          rigid clumps at given positions and orientations (LIGGGHTS-PUBLIC
+                           multisphere bodies only enter through ``fix insert/*``: not offered)
 ``particle_stress``        per-particle stress tensor
 ``contact_output``         contact list with forces
 ``periodic``               periodic boundaries
@@ -42,7 +44,7 @@ FEATURES = (
     "hertz", "restitution_damping", "low_restitution", "seed000_damping", "sliding_friction", "adhesion",
     "rolling_friction", "rolling_friction_load", "torsion_friction", "plane_wall",
     "cylinder_wall", "mesh_walls", "rotating_walls", "servo_wall", "membrane", "clumps",
-    "particle_stress", "contact_output", "periodic",
+    "placed_clumps", "particle_stress", "contact_output", "periodic",
 )
 
 REPO = Path(__file__).resolve().parents[1]

@@ -38,6 +38,7 @@ class Yade(Engine):
         "servo_wall": "ServoPIDController",
         "membrane": "GridNode/GridConnection/PFacet with nodal pressure forces",
         "clumps": "Clump",
+        "placed_clumps": "O.bodies.clump(member ids) on spheres placed by the orchestrator",
         "particle_stress": "bodyStressTensors()",
         "contact_output": "O.interactions",
         "periodic": "O.periodic",

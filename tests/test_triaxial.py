@@ -69,17 +69,7 @@ def test_isotropic_stage(runs, eng):
     assert abs(iso["stress_ratio"] - 1) <= 0.05, iso
 
 
-#: issue #4 floors YADE's membrane does not reach yet (measured on the smoke case, 2026-11-21); strict:
-#: each marker fails the suite the day its check passes, so it cannot outlive the fix
-YADE_LATERAL_STRAY = pytest.mark.xfail(strict=True, reason=(
-    "YADE membrane: lateral stress strays up to 18 % from 300 kPa during axial loading (10-row means; "
-    "floor 10 %): the follow-the-surface membrane needs a damped grain-membrane contact law in C++"))
-YADE_VOLUME_TWO_WAYS = pytest.mark.xfail(strict=True, reason=(
-    "YADE membrane: the membrane-enclosed volume changes about twice as much as the convex hull of "
-    "the grains during loading (difference 0.035 in volumetric strain; floor 0.02)"))
-
-
-@pytest.mark.parametrize("eng", ["liggghts", pytest.param("yade", marks=YADE_LATERAL_STRAY)])
+@pytest.mark.parametrize("eng", ENGINES)
 def test_axial_loading(runs, eng):
     out = outcome(runs, eng)
     case = load_case(SMOKE)
@@ -96,7 +86,7 @@ def test_axial_loading(runs, eng):
         assert subs.get("membrane") == "shell_pressure"
 
 
-@pytest.mark.parametrize("eng", ["liggghts", pytest.param("yade", marks=YADE_VOLUME_TWO_WAYS)])
+@pytest.mark.parametrize("eng", ENGINES)
 def test_volumetric_strain_two_ways(runs, eng):
     out = outcome(runs, eng)
     with h5py.File(out.run_dir / "frames.h5") as f:
@@ -201,3 +191,16 @@ def test_monitors_stop_an_unstable_triaxial_run(eng, tmp_path):
     assert u["figure"] in ("kinetic_energy", "overlap", "grains_outside", "nan", "wall_force", "wall_force_swing")
     assert u["step"] < s["steps"] / 2
     assert not (out.run_dir / "frames.h5").exists()
+
+
+@pytest.mark.parametrize("eng", ENGINES)
+def test_monitors_watch_the_smoke_runs(runs, eng):
+    """The monitors ran during the smoke runs (LIGGGHTS echoes each check) and nothing tripped."""
+    out = outcome(runs, eng)
+    assert out.status == "complete"
+    log = (out.run_dir / "engine.log").read_text()
+    assert "\nORCH_UNSTABLE:" not in log
+    if eng == "liggghts":
+        assert log.count("if '${ORCH_ke} >") >= 10
+    else:
+        assert "orch_monitor_engine()," in (out.run_dir / "script.py").read_text()

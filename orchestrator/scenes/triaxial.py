@@ -189,6 +189,30 @@ class Lateral(Strict):
     update_every: int = Field(20, ge=1)
 
 
+class Particles(Strict):
+    """Grain shape: ``spheres`` (default) or ``clumps`` built from a shape library (orchestrator.clumps:
+    YAML ``shapes: [{spheres: [[x, y, z, r], ...]}]`` or NPZ ``spheres``/``shape``). Each grain takes a
+    random library shape and orientation, scaled to the volume of its sampled PSD diameter; the
+    packing places the clumps' bounding spheres. YADE builds them with ``O.bodies.clump``; LIGGGHTS
+    refuses (``placed_clumps``: multisphere bodies only enter through ``fix insert/*``)."""
+    shape: Literal["spheres", "clumps"] = "spheres"
+    library: str | None = Field(None, description="clump library file (.yaml/.yml or .npz); relative paths "
+                                                  "are taken from the working directory")
+    discretization: int = Field(20, ge=5, le=200, description="YADE clump() grid cells per clump diameter for "
+                                                              "the union's mass and inertia")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.shape == "clumps":
+            if not self.library:
+                raise ValueError("particles.shape: clumps needs particles.library (a .yaml or .npz shape library)")
+            from ..clumps import load_library
+            load_library(self.library)          # raises LibraryError (a ValueError) naming file and shape
+        elif self.library is not None:
+            raise ValueError("particles.library is only used with particles.shape: clumps")
+        return self
+
+
 class Scene(Strict):
     kind: Literal["triaxial"]
     diameter: Length = "12 mm"
@@ -196,6 +220,7 @@ class Scene(Strict):
     grains: int | None = Field(None, ge=20, description="scale the sample (same height/diameter) to hold about "
                                                          "this many grains; None: as many as fit")
     psd: PSD
+    particles: Particles = Field(default_factory=Particles)
     packing_fraction: float = Field(0.52, gt=0.3, lt=0.56, description="solid fraction of the generated packing")
     confining_pressure: Pressure = "300 kPa"
     axial_strain: float = Field(0.2, gt=0, lt=0.5, description="axial strain at the end of loading")
@@ -218,6 +243,8 @@ class Scene(Strict):
 # ---------------------------------------------------------------------------------------------
 def required_features(case) -> list[str]:
     feats = ["hertz", "restitution_damping", "sliding_friction", "membrane"]
+    if case.scene.particles.shape == "clumps":
+        feats.append("placed_clumps")
     if case.output.stress:
         feats.append("particle_stress")
     if case.output.contacts:
@@ -226,8 +253,70 @@ def required_features(case) -> list[str]:
 
 
 def size_range(case) -> tuple[float, float]:
+    """Smallest and largest sphere radius [m] the engine integrates (clumps: member spheres of the
+    library shapes scaled to the PSD's smallest and largest diameters; the time step follows)."""
     lo, hi = case.scene.psd.bounds()
+    if case.scene.particles.shape == "clumps":
+        from ..clumps import equivalent_scale
+        shapes = _clump_library(case.scene.particles.library)
+        r_lo = min(float(sh[:, 3].min()) * equivalent_scale(sh, lo, v) for sh, (v, _) in shapes)
+        r_hi = max(float(sh[:, 3].max()) * equivalent_scale(sh, hi, v) for sh, (v, _) in shapes)
+        return r_lo, r_hi
     return lo / 2, hi / 2
+
+
+_LIB_CACHE: dict = {}
+
+
+def _clump_library(path) -> list:
+    """[(shape (m, 4), (union volume, centre of mass))] of a clump library, cached by path."""
+    from ..clumps import load_library, mass_properties
+    key = str(Path(path).resolve())
+    if key not in _LIB_CACHE:
+        out = []
+        for sh in load_library(path):
+            mp = mass_properties(sh)
+            out.append((sh, (mp["volume"], mp["center"])))
+        _LIB_CACHE[key] = out
+    return _LIB_CACHE[key]
+
+
+def _clump_draw(case, d: np.ndarray):
+    """Per grain: library shape index, orientation quaternion, scale to the volume of diameter d,
+    bounding-sphere radius [m]; and f = (Σ r_b³ / Σ (d/2)³)^(1/3), the factor by which the sample
+    grows so that the bounding spheres fill it at the case's packing fraction."""
+    from ..clumps import bounding_radius, equivalent_scale, random_quaternions
+    lib = _clump_library(case.scene.particles.library)
+    rng = np.random.default_rng(case.seed + 3)
+    k = rng.integers(len(lib), size=len(d))
+    q = random_quaternions(len(d), rng)
+    scale = np.array([equivalent_scale(lib[kk][0], di, lib[kk][1][0]) for kk, di in zip(k, d)])
+    rb = np.array([bounding_radius(lib[kk][0], lib[kk][1][1]) * sc for kk, sc in zip(k, scale)])
+    return k, q, scale, rb, float((np.sum(rb ** 3) / np.sum((d / 2) ** 3)) ** (1 / 3))
+
+
+def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """Clumps for grains of volume-equivalent diameters ``d`` [m]: a random library shape and a
+    uniformly random orientation each, scaled to the grain's volume; their bounding spheres packed
+    by :func:`pack_cylinder` in the cylinder of radius R, height H [m] (:func:`derive` has enlarged
+    it by :func:`_clump_draw`'s f). Returns (member spheres (M, 4) [m], clump index of each member (M,),
+    clump mass centres (n, 3), packing geometry of the members)."""
+    from ..clumps import place
+    lib = _clump_library(case.scene.particles.library)
+    k, q, scale, rb, f = _clump_draw(case, d)
+    centres, _ = cached_packing(rb, R, H, case.seed + 2)
+    members, owner = [], []
+    for i in range(len(d)):
+        sh, (_, com) = lib[k[i]]
+        members.append(place(sh, centres[i], scale[i], q[i], com))
+        owner.append(np.full(len(sh), i))
+    m = np.vstack(members)
+    rr = np.hypot(m[:, 0], m[:, 1])
+    geo = {"radius0": float(np.max(rr + m[:, 3])), "z_bottom0": float(np.min(m[:, 2] - m[:, 3])),
+           "z_top0": float(np.max(m[:, 2] + m[:, 3])), "clump_count": int(len(d)),
+           "clump_members": int(len(m)), "clump_bounding_scale": float(f)}
+    geo["height0"] = geo["z_top0"] - geo["z_bottom0"]
+    return m, np.concatenate(owner), centres, geo
 
 
 def strain_rate(case) -> float:
@@ -275,6 +364,8 @@ def _sample_size_uncached(case):
     # rescale the sample so that the *sampled* grains fill it at packing_fraction exactly
     vs = float(np.sum(np.pi / 6 * d ** 3))
     k = (vs / s.packing_fraction / (np.pi / 4 * D ** 2 * H)) ** (1 / 3)
+    if s.particles.shape == "clumps":
+        k *= _clump_draw(case, d)[4]          # the clumps' bounding spheres fill it at packing_fraction
     return D * k, H * k, n, d
 
 
@@ -363,6 +454,7 @@ def derive(case, common: dict) -> dict:
         "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
         "restart_every": 2_000_000_000,    # (int32) no restart files: a triaxial run restarts from scratch
         "platen_friction": s.platen_friction,
+        "clumps": ({"discretization": s.particles.discretization} if s.particles.shape == "clumps" else None),
         "membrane": {"n_theta": n_theta, "n_z": n_z, "node_radius": r_node, "E_conn": E_conn,
                      "E_facet": E_facet, "k_contact": k_contact, "node_mass": m_node,
                      "friction": m.friction, "update_every": m.update_every, "density": m.density,
@@ -393,6 +485,16 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
     geo_path = run_dir / "packing.json"
     if geo_path.exists() and (run_dir / "particles.txt").exists():
         geo = json.loads(geo_path.read_text())
+    elif case.scene.particles.shape == "clumps":
+        # one particles.txt row per member sphere (frames.h5 holds the spheres); clumps.txt maps
+        # each member id to its clump (0 ... n-1)
+        m, owner, _, geo = build_clumps(case, np.asarray(sc["diameters"]), sc["diameter"] / 2, sc["height"])
+        ids = np.arange(1, len(m) + 1)
+        write_particle_table(run_dir / "particles.txt", ids, m[:, 3], case.material.density, m[:, :3])
+        from ..atomic import write_text
+        write_text(run_dir / "clumps.txt", "# member_id clump\n" +
+                   "".join(f"{i} {c}\n" for i, c in zip(ids, owner)))
+        write_json(geo_path, geo)
     else:
         r = np.asarray(sc["diameters"]) / 2
         pos, geo = cached_packing(r, sc["diameter"] / 2, sc["height"], case.seed + 2)
