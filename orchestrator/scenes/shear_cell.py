@@ -104,6 +104,11 @@ class Scene(Strict):
     wall_samples: int = Field(2000, ge=10, description="wall time-series samples over the whole run")
     wall_adhesion: bool = Field(False, description="seed §3.3: particle-wall contacts use the visco-elastic part "
                                                    "of eq. 1 only (no adhesion)")
+    wall_friction: bool = Field(False, description="seed §3.3: particle-wall contacts use the visco-elastic part of "
+                                                   "eq. 1, the normal Hertz + damping terms only, so no Coulomb "
+                                                   "friction at walls by default; true gives walls the particles' "
+                                                   "Coulomb mu. Rolling and twisting resistance are never applied "
+                                                   "at walls")
 
     _pos = positive("cell_diameter", "gap", "vane_thickness", "plate_thickness", "fill_height", "normal_stress",
                      "final_angle")
@@ -384,6 +389,8 @@ def derive(case, common: dict) -> dict:
         "box_lo": [-R - box_margin, -R - box_margin, g["z_can"][0] - box_margin],
         "box_hi": [R + box_margin, R + box_margin, g["z_can"][1] + box_margin],
         "wall_adhesion": s.wall_adhesion,
+        # seed §3.3: walls are Hertz + damping (eq. 1's visco-elastic part): Coulomb mu only if asked
+        "wall_friction": s.wall_friction, "wall_mu": case.contact.friction if s.wall_friction else 0.0,
     }
 
 
