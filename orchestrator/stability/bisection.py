@@ -19,13 +19,13 @@ from dataclasses import asdict, dataclass, field
 PROBE = {"plane_shear": {"scene": {"shear_strain": 0.1, "settle_time_constants": 3, "shear_frames": 1,
                                    "wall_samples": 20}}}
 #: members shortened further (by case name): at real stiffness the compression from the loose
-#: packing at I_c = 0.02 alone is 3-5e5 steps per probe (dt ~ 6e-9 s); starting denser (0.35, the
-#: schema's largest loose fraction) and compressing 5x faster (I_c = 0.1) cuts a probe to ~1e5
-#: steps. Faster walls raise the largest expected speed, so the pre-run check of the *probe* is
-#: the one the probe is compared with (its binding limit may differ from the full member's; both
-#: are in docs/stability.md)
-MEMBER_PROBE = {name: {"scene": {"loose_fraction": 0.35, "compression_inertial_number": 0.1}}
-                for name in ("stability_quartz_stiff", "stability_glass_25um")}
+#: packing at I_c = 0.02 alone is 3-5e5 steps per probe (dt ~ 6e-9 s); compressing 5x faster
+#: (I_c = 0.1) and, for quartz, starting denser (0.35, the schema's largest loose fraction; the
+#: narrow glass PSD jams there in random sequential addition) cuts a probe to ~1e5 steps. Faster
+#: walls raise the largest expected speed, so the pre-run check of the *probe* is the one the probe
+#: is compared with (its binding limit may differ from the full member's; both in docs/stability.md)
+MEMBER_PROBE = {"stability_quartz_stiff": {"scene": {"loose_fraction": 0.35, "compression_inertial_number": 0.1}},
+                "stability_glass_25um": {"scene": {"compression_inertial_number": 0.1}}}
 
 
 @dataclass

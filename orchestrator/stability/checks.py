@@ -176,9 +176,9 @@ def check(case, params: dict) -> dict:
     worst = max(c["overlap"] for c in cs["contacts"].values() if "overlap" in c) / params["r_min"]
     if worst > 0.1:
         report["warnings"] = [f"the stiffest contact is expected at an overlap of {worst:.2g} r_min (a big grain's "
-                              f"share of the confining force on two smallest grains): Hertz is not valid there, and "
-                              f"the measured stable dt can fall below this check (cases/stability/very_soft: "
-                              f"docs/stability.md)"]
+                              f"share of the confining force on two smallest grains): Hertz is not valid there; the "
+                              f"overlap monitor is raised accordingly and watches for blow-up only "
+                              f"(cases/stability/very_soft: docs/stability.md)"]
     if over and not case.timestep.allow_unsafe:
         lines = [f"{k}: dt/limit = {fractions[k]:.3g} > {safe[k]:g} (limit {cs['limits'][k]:.3e} s)" for k in over]
         raise DerivationError(

@@ -106,10 +106,17 @@ class LocalExecutor(Executor):
         if self.workers == 1 or self.pool is not None:
             return
         import multiprocessing as mp
-        # forkserver: workers fork from a clean server that has imported the runner once, instead of
-        # each spawned worker importing numpy/scipy/h5py/pydantic again (seconds per short run)
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["orchestrator.runner", "orchestrator.stability.sweep"])
+        import threading
+        if threading.active_count() == 1:
+            # a single-threaded caller (the CLI, a script): fork it, so the workers start with its
+            # imports and caches (engine versions, restitution inversion) at no cost
+            ctx = mp.get_context("fork")
+        else:
+            # threads in the caller (a notebook, a Dask client) make fork unsafe. forkserver: workers
+            # fork from a clean server that has imported the runner once, instead of each spawned
+            # worker importing numpy/scipy/h5py/pydantic again (seconds per short run)
+            ctx = mp.get_context("forkserver")
+            ctx.set_forkserver_preload(["orchestrator.runner", "orchestrator.stability.sweep"])
         self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=warm_worker,
                                         initargs=(str(case_path) if case_path else None, tuple(engines or ()),
                                                   overrides))
