@@ -90,18 +90,22 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
         ks = sorted({0, frames.n_frames - 1})
     else:
         ks = frame_indices(frames, at, control, stride or 1)
-    first = pos_all[ks[0]]
-    okf = present(first)
+    # default extents cover every selected frame (a compacted sample may have left the first
+    # frame's height range entirely: the shear cell's lower piston lifts it by ~0.5 mm)
+    sel = pos_all[ks].reshape(-1, 3)
+    rad = np.tile(frames.radius, len(ks))
+    okf = present(sel)
     if center is None:
-        lo, hi = np.nanmin(first[okf], 0), np.nanmax(first[okf], 0)
+        first = pos_all[ks[0]]
+        lo, hi = np.nanmin(first[present(first)], 0), np.nanmax(first[present(first)], 0)
         center = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))
     center = tuple(float(c) for c in center)
     if r_max is None:
-        rc = np.hypot(first[okf, 0] - center[0], first[okf, 1] - center[1])
-        r_max = float(np.max(rc + frames.radius[okf]))
+        rc = np.hypot(sel[okf, 0] - center[0], sel[okf, 1] - center[1])
+        r_max = float(np.max(rc + rad[okf]))
     if z_range is None:
-        zz = first[okf, 2] - z_ref
-        z_range = (float(np.min(zz - frames.radius[okf])), float(np.max(zz + frames.radius[okf])))
+        zz = sel[okf, 2] - z_ref
+        z_range = (float(np.min(zz - rad[okf])), float(np.max(zz + rad[okf])))
     axial_r_range = axial_r_range or (0.0, r_max)
     radial_z_range = radial_z_range or z_range
     z_edges = np.linspace(z_range[0], z_range[1], bins_z + 1)

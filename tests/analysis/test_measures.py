@@ -37,6 +37,19 @@ def test_analyze_profiles_shear_cell(shear_cell):
     assert (res.tables["radial"]["phi"] < 0.74).all()
 
 
+def test_profiles_default_range_covers_every_selected_frame(tmp_path):
+    # a sample lifted by far more than its height between the first and the last frame (the shear
+    # cell's piston lifts the loose packing by ~0.5 mm): both frames must be counted in full
+    rng = np.random.default_rng(3)
+    p0 = rng.uniform(0, 20 * D, (300, 3))
+    p1 = p0 * [1, 1, 0.5] + [0, 0, 40 * D]
+    path = tmp_path / "frames.h5"
+    write_frames(path, np.arange(300), np.full(300, 0.5 * D), [0.0, 1.0], np.stack([p0, p1]))
+    ax = analyze_profiles(Frames(path), bins_z=20).tables["axial"]
+    assert ax.query("frame == 0")["count"].sum() == 300
+    assert ax.query("frame == 1")["count"].sum() == 300
+
+
 def test_mu_macro_disc_formula(shear_cell):
     assert mu_macro(3.0, 2.0, 0.5) == pytest.approx(1.5 * 3 / (0.5 * 2))
     assert mu_macro(-3.0, 2.0, 0.5, "ring") == pytest.approx(3.0)
