@@ -143,7 +143,8 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
         if threshold is None and hi_ - lo_ <= 1e-6 * max(abs(hi_), 1.0):
             raise SegmentationError(f"{scan.source}: the volume has a single grey value ({lo_:.4g}); "
                                     "nothing to segment")
-        thr = float(threshold_isodata(sm) if threshold is None else threshold)
+        with np.errstate(divide="ignore", invalid="ignore"):      # empty histogram bins, harmless
+            thr = float(threshold_isodata(sm) if threshold is None else threshold)
         binary = sm > thr
         pore_level = float(sm[~binary].mean()) if (~binary).any() else thr
         solid_level = float(sm[binary].mean()) if binary.any() else thr
@@ -247,6 +248,9 @@ def grow_labels(labels, distance=1.5):
 def _peak_markers(dist):
     """Regional maxima of a distance map (plateau-exact, 26-connected), each labelled: the seeds of
     an over-segmentation that :func:`_merge_shallow_basins` reduces to the h-maxima partition.
+    (Seeding at every voxel equal to its 3x3x3 maximum is 2x faster but adds non-maximal plateau
+    pieces whose basins go whole to one neighbour: 99.4 % instead of 99.8 % of voxels as the
+    reference, centroid error 0.083 instead of 0.078 voxel on the test packing.)
     Returns (markers int32, count)."""
     from skimage.morphology import local_maxima
     peaks = local_maxima(dist, connectivity=3, allow_borders=True)
