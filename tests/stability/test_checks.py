@@ -68,3 +68,25 @@ def test_safe_fraction_tightens_the_check():
     assert p["stability"]["binding"] == "rayleigh"
     with pytest.raises(CaseError, match="rayleigh"):
         load_case(CASES / "stability" / "quartz_stiff.yaml", overrides={"stability": {"safe_fraction": 0.1}})
+
+
+def test_coordination_limit_from_the_rotational_row():
+    """A grain turning against Z contacts: ω_rot² = Z k_t r²/I = (2.5 Z/7) ω_t², its damping ratio
+    ζ_t (Z/2.8)(ω_t/ω_rot); it binds the strongly damped member, where YADE heats up below the
+    pair limits (docs/stability.md)."""
+    from orchestrator.stability.checks import COORDINATION
+    case = load_case(CASES / "stability" / "restitution_overdamped.yaml")
+    p = derive(case)
+    cs = critical_steps(case, p)
+    t, c = cs["contacts"]["tangential"], cs["contacts"]["coordination"]
+    Z = COORDINATION
+    assert c["omega"] ** 2 == pytest.approx(2.5 * Z / 7 * t["omega"] ** 2)
+    assert c["damping_ratio"] == pytest.approx(t["damping_ratio"] * Z / 2.8 * t["omega"] / c["omega"])
+    zr = c["damping_ratio"]
+    assert cs["limits"]["coordination"] == pytest.approx(2 / c["omega"] * (math.sqrt(1 + zr ** 2) - zr))
+    assert cs["limits"]["coordination"] < cs["limits"]["tangential"]
+    assert p["stability"]["binding"] == "coordination"
+    # measured on YADE: the settled packing heats from f = 0.6; the check must accept less
+    assert p["stability"]["dt_max_safe"] / p["dt_critical"] < 0.5
+    # frictionless grains have no tangential spring, hence no such limit
+    assert "coordination" not in derive(load_case(CASES / "stability" / "mu0.yaml"))["stability"]["limits"]
