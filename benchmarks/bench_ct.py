@@ -1,6 +1,6 @@
 """CT benchmark (not a test): linking speed vs trackpy, and segmentation of a 512^3 scan on one core.
 
-    OMP_NUM_THREADS=1 python3 benchmarks/bench_ct.py [--size 512] [--skip-segment] [--cache scan512.npy]
+    OMP_NUM_THREADS=1 python3 benchmarks/bench_ct.py [--size 512] [--skip-segment] [--skip-link] [--cache scan512.npy]
 
 Prints the figures quoted in docs/ct.md.
 """
@@ -89,8 +89,10 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--skip-segment", action="store_true")
+    ap.add_argument("--skip-link", action="store_true")
     ap.add_argument("--cache", help="scan .npy to reuse (written on the first run)")
     a = ap.parse_args()
-    bench_link()
+    if not a.skip_link:
+        bench_link()
     if not a.skip_segment:
         bench_segment(a.size, cache=a.cache)
