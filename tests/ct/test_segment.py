@@ -2,7 +2,7 @@
 import numpy as np
 from scipy.spatial import cKDTree
 
-from orchestrator.ct import segment, synth
+from orchestrator.ct import segment
 from orchestrator.ct.io import Scan
 
 VS = 1e-5            # voxel size [m], as in conftest.py
@@ -68,7 +68,7 @@ def test_contacts_and_pca_normals(sphere_packing):
 
 
 def test_flags_under_and_over_segmentation(sphere_packing):
-    c, r, scan = sphere_packing["centres"], sphere_packing["radii"], sphere_packing["scan"]
+    c, scan = sphere_packing["centres"], sphere_packing["scan"]
     # markers from the plain IsoData distance map with a high h merge many touching pairs
     seg = segment.segment(scan, h=2.5 * VS, marker_level=None)
     g = seg.grains
