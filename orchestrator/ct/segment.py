@@ -302,7 +302,7 @@ def _merge_shallow_basins(basins, height, h, seeds):
 
     basins : int labels (0 = background), consecutive from 1, grown from the labelled regional maxima
     ``seeds`` (same labels); height : float map of the same shape.
-    Returns int32 labels, consecutive from 1 (in the order of each group's highest basin label).
+    Returns int32 labels, consecutive from 1 (in the order of the label of each group's highest basin).
     """
     n = int(basins.max())
     if n == 0:

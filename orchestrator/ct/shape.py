@@ -15,6 +15,11 @@ They are unchanged by rotating or translating the grain; ``||R_0|| = sqrt(4 pi) 
 
 The surface radius of a segmented grain is measured by casting rays from the centroid through a
 sub-voxel "solid fraction" image restricted to the grain (see :func:`grain_shapes`).
+
+Reproducibility (docs/ct.md): turning a grain ~14 voxels across changes ``||R||`` by ~0.016 voxel
+(median, noise-free scans); between two scans with noise of 8 % of the contrast it changes by
+~0.07 voxel whether or not the grain turned, the noise of each coefficient (~0.02 voxel) being near
+the information bound sigma_noise * sqrt(2 sqrt(pi) sigma_psf) / r of the data.
 """
 from __future__ import annotations
 
