@@ -266,28 +266,29 @@ def face_pairs(labels, connectivity=1):
     each pair is listed once).
     Returns (la, lb, ia, ib, axis): the two labels, the flat (C-order) indices of the two voxels and,
     for face pairs, the axis (0, 1, 2 = z, y, x) along which ``ib`` follows ``ia`` (-1 otherwise).
-    Vectorised over the volume (one shifted comparison per offset)."""
-    shape = labels.shape
-    strides = np.array([shape[1] * shape[2], shape[2], 1])
-    offsets = [o for o in np.ndindex(3, 3, 3) if 0 < np.abs(np.subtract(o, 1)).sum() <= connectivity]
-    offsets = [np.subtract(o, 1) for o in offsets]
-    offsets = [o for o in offsets if tuple(o) > (0, 0, 0)]           # one of each +-pair
+    Vectorised: one comparison of the flat volume with itself shifted per offset; pairs that wrap
+    around a row or a slice are dropped afterwards."""
+    nz, ny, nx = labels.shape
+    flat = np.ascontiguousarray(labels).ravel()
+    offsets = [np.subtract(o, 1) for o in np.ndindex(3, 3, 3)]
+    offsets = [o for o in offsets if 0 < np.abs(o).sum() <= connectivity and tuple(o) > (0, 0, 0)]
     la, lb, ia, ib, ax_ = [], [], [], [], []
-    for o in offsets:
-        sa = tuple(slice(max(0, -d), n - max(0, d)) for d, n in zip(o, shape))
-        sb = tuple(slice(max(0, d), n - max(0, -d)) for d, n in zip(o, shape))
-        a, b = labels[sa], labels[sb]
-        m = a != b
-        m &= a > 0
-        m &= b > 0
-        idx = np.nonzero(m)
-        del m
-        flat = sum((i + s.start).astype(np.int64) * st for i, s, st in zip(idx, sa, strides))
-        la.append(a[idx])
-        lb.append(b[idx])
-        ia.append(flat)
-        ib.append(flat + int(np.dot(o, strides)))
-        ax_.append(np.full(len(flat), int(np.argmax(o)) if np.abs(o).sum() == 1 else -1, np.int8))
+    for dz, dy, dx in offsets:
+        k = int(dz * ny * nx + dy * nx + dx)                      # > 0: one of each +-pair
+        i = np.flatnonzero(flat[:-k] != flat[k:])
+        a, b = flat[i], flat[i + k]
+        ok = (a > 0) & (b > 0)
+        i, a, b = i[ok], a[ok], b[ok]
+        if dy or dx:
+            y, x = (i // nx) % ny + dy, i % nx + dx
+            ok = (y >= 0) & (y < ny) & (x >= 0) & (x < nx)
+            i, a, b = i[ok], a[ok], b[ok]
+        la.append(a)
+        lb.append(b)
+        ia.append(i)
+        ib.append(i + k)
+        face = abs(dz) + abs(dy) + abs(dx) == 1
+        ax_.append(np.full(len(i), int(np.argmax((dz, dy, dx))) if face else -1, np.int8))
     return tuple(np.concatenate(v) for v in (la, lb, ia, ib, ax_))
 
 
