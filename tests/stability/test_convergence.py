@@ -19,8 +19,8 @@ def test_pareto_and_errors():
 
 @pytest.mark.engine
 def test_dt_ladder(runs_root, tmp_path, engines_installed):
-    # rungs below the pre-run check's safe limit for this case (0.66 of the critical step)
-    out = ladder(CASE, "dt_fraction", [0.6, 0.3, 0.15], engines=["liggghts"], runs_root=runs_root,
+    # rungs below the pre-run check's safe limit for this case (0.48 of the critical step, coordination)
+    out = ladder(CASE, "dt_fraction", [0.4, 0.2, 0.1], engines=["liggghts"], runs_root=runs_root,
                  target_error=0.2, plot=tmp_path / "ladder.png")
     df = out["table"]
     assert len(df) == 3 and (df["status"] == "complete").all()
@@ -33,12 +33,12 @@ def test_dt_ladder(runs_root, tmp_path, engines_installed):
     assert "err_mu_macro" in df.columns
     assert (tmp_path / "ladder.png").stat().st_size > 5000
     rec = out["recommendation"]["liggghts"]
-    assert rec["dt_fraction"] in (0.6, 0.3, 0.15)
+    assert rec["dt_fraction"] in (0.4, 0.2, 0.1)
     if "note" not in rec:
         assert rec["error"] <= 0.2
 
 
 def test_refused_rung_is_a_row(runs_root):
-    # dt_fraction 1.0 is above the tangential limit's safe fraction for this case: refused, not run
+    # dt_fraction 1.0 is above the coordination limit's safe fraction for this case: refused, not run
     out = ladder(CASE, "dt_fraction", [1.0], engines=["liggghts"], runs_root=runs_root, reference=1.0)
     assert out["table"].loc[0, "status"] == "refused"
