@@ -1,6 +1,7 @@
 """The membrane triaxial test (seed 001, issue 4) on both real engines, smoke case.
 
-One run per engine (about 30 s LIGGGHTS, 2-3 min YADE on one free core). Checks the floors of
+One run per engine (about 30 s LIGGGHTS, 2-3 min YADE on one free core), plus a YADE run on a
+second packing (seed 2) and two short unstable runs for the monitors. Checks the floors of
 issue 4: confining pressure within 3 % of the target before axial loading, σ1/σ3 = 1 ± 0.05 after
 isotropic compression, the final axial strain as asked, no grain escaping the lateral boundary,
 volumetric strain measured two independent ways (boundary volume, convex hull of the grains)
@@ -204,3 +205,34 @@ def test_monitors_watch_the_smoke_runs(runs, eng):
         assert log.count("if '${ORCH_ke} >") >= 10
     else:
         assert "orch_monitor_engine()," in (out.run_dir / "script.py").read_text()
+
+
+#: the smoke floors on a second packing (seed 2), YADE: measured 2026-11-21 with the membrane of
+#: docs/triaxial.md (spacing 3 d50, dashpot every step). Strict: fails the suite the day it passes.
+YADE_STRAY_SEED2 = pytest.mark.xfail(strict=True, reason=(
+    "YADE membrane, seed 2: lateral stress strays 0.128 from 300 kPa (10-row means; floor 0.10) while "
+    "seed 1 gives 0.026: the floor is met on one packing, not robustly"))
+
+
+@pytest.fixture(scope="module")
+def yade_seed2(tmp_path_factory):
+    from orchestrator.runner import run_case
+    if shutil.which("yade") is None:
+        pytest.fail("yade is not installed; run `bash .ci/setup`")
+    return run_case(load_case(SMOKE, overrides={"seed": 2}), "yade",
+                    runs_root=tmp_path_factory.mktemp("triaxial_seed2"), progress=False)
+
+
+@YADE_STRAY_SEED2
+def test_yade_lateral_stray_second_packing(yade_seed2):
+    sh = yade_seed2.summary["scene"]["shear"]
+    assert sh["sigma3_error_max_abs_smoothed"] <= 0.10, sh
+
+
+def test_yade_volume_two_ways_second_packing(yade_seed2):
+    with h5py.File(yade_seed2.run_dir / "frames.h5") as f:
+        fr = f["frames"]
+        shear = fr["stage"][:] >= 2
+        diff = np.max(np.abs(fr["volumetric_strain"][:][shear] - fr["volumetric_strain_hull"][:][shear]))
+    assert shear.sum() >= 5
+    assert diff <= 0.02, f"seed 2: volumetric strain boundary vs hull differ by up to {diff:.4f}"
