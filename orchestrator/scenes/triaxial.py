@@ -150,6 +150,9 @@ class Isotropic(Strict):
                                          "such that a grain pushed by p d50² drifts at drag_inertial_number·√(p/ρ): "
                                          "keeps the compaction of the loose packing from turning into a collapse")
     drag_inertial_number: float = Field(0.05, gt=0, le=1)
+    drag_free_end: bool = Field(True, description="when stage 1 converges with the drag on, switch the drag off and "
+                                                  "continue stage 1 until it converges again without it: the loose "
+                                                  "sample's collapse then happens before loading, not at its start")
 
 
 class Membrane(Strict):
@@ -449,6 +452,7 @@ def derive(case, common: dict) -> dict:
         "iso": {"chunk": iso_chunk, "max_chunks": s.isotropic.max_chunks, "tolerance": s.isotropic.tolerance,
                 "v_max": v_iso, "gain": s.isotropic.gain, "ramp_steps": max(1, ramp),
                 "strain_rate_max": rate_iso, "drag_viscosity": nu,
+                "drag_free_end": bool(s.isotropic.drag_free_end and nu > 0),
                 "drag_coefficient": 6 * math.pi * nu},
         "dump_every": dump_every, "series_every": series_every,
         "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
