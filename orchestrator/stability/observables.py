@@ -50,18 +50,29 @@ def _shear_cell(case, fr, params) -> dict:
     from ..analysis.friction import analyze_friction
     out = {}
     sc = params["scene"]
-    R = sc["geometry"]["R_piston"]
+    # mu_macro as the case's own `friction` analysis computes it (same radius: the sample's, by
+    # default; same steady window), so that the ladder and the run report print the same number
+    from ..analysis import parse_specs
+    opts = {"torque_wall": "rotating", "force_wall": "lower_piston", "steady_control": "angle",
+            "steady_from": 0.5 * case.scene.final_angle}
+    opts.update(next((o for n, o in parse_specs(case.analysis) if n == "friction"), {}))
     try:
-        res = analyze_friction(fr, radius=R, torque_wall="rotating", force_wall="lower_piston",
-                               steady_from=0.5 * case.scene.final_angle, steady_control="angle")
+        res = analyze_friction(fr, **opts)
         out["mu_macro"] = float(res.scalars["mu_mean"])
     except Exception as exc:
         out["mu_macro_error"] = str(exc)
     try:
         from ..analysis.shearband import analyze_shearband
-        res = analyze_shearband(fr)
-        out["shearband_z"] = float(res.scalars.get("z_sb_last", float("nan")))
-        out["shearband_width"] = float(res.scalars.get("w_sb_last", float("nan")))
+        res = analyze_shearband(fr, **next((o for n, o in parse_specs(case.analysis) if n == "shearband"), {}))
+        # steady band (seed 000 Fig. 2): the r-averaged steady position and width; a single
+        # frame pair's fit (z_sb_last) scatters by ~20 um on the small case
+        st = res.tables.get("steady")
+        if st is not None and len(st) and np.isfinite(st["z_sb"]).any():
+            out["shearband_z"] = float(np.nanmean(st["z_sb"]))
+            out["shearband_width"] = float(np.nanmean(st["w_sb"]))
+        else:
+            out["shearband_z"] = float(res.scalars.get("z_sb_last", float("nan")))
+            out["shearband_width"] = float(res.scalars.get("w_sb_last", float("nan")))
     except Exception as exc:
         out["shearband_error"] = str(exc)
     # axial number-density profile of the last frame (10 bins between the plate faces)
