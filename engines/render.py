@@ -45,11 +45,38 @@ def render_template(name: str, context: dict, out: Path) -> Path:
     return write_text(out, text)
 
 
+def scene_templates(engine: str, scene: str) -> list[str] | None:
+    """The templates a scene's deck is rendered from: its main template and, recursively, every
+    template it includes or imports (jinja2.meta). None when a reference is computed at render
+    time (then every template of the engine counts) or the scene has no template."""
+    from jinja2 import meta
+    env = environment()
+    mains = [f"{engine}/{scene}{ext}" for ext in (".in.j2", ".py.j2") if (TEMPLATES / engine / f"{scene}{ext}").is_file()]
+    if not mains:
+        return None
+    seen, todo = set(), list(mains)
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        source = (TEMPLATES / name).read_text()
+        for ref in meta.find_referenced_templates(env.parse(source)):
+            if ref is None:
+                return None
+            todo.append(ref)
+    return sorted(seen)
+
+
 def templates_hash(engine: str, scene: str) -> str:
-    """Hash of every template an engine may use (its folder), for run directories."""
+    """Hash of the templates a scene's deck uses (:func:`scene_templates`; all of the engine's
+    when that cannot be told), for run directories: editing another scene's deck leaves this
+    scene's runs reusable."""
+    names = scene_templates(engine, scene)
+    if names is None:
+        names = sorted(f.relative_to(TEMPLATES).as_posix() for f in (TEMPLATES / engine).rglob("*") if f.is_file())
     h = hashlib.sha256()
-    for f in sorted((TEMPLATES / engine).rglob("*")):
-        if f.is_file():
-            h.update(f.relative_to(TEMPLATES).as_posix().encode())
-            h.update(f.read_bytes())
+    for name in names:
+        h.update(name.encode())
+        h.update((TEMPLATES / name).read_bytes())
     return h.hexdigest()

@@ -49,11 +49,14 @@ class RunOutcome:
 def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | None = None) -> str:
     """Hash of what determines a run: the resolved case, the derived numbers handed to the
     engine (so a change in orchestrator.derive makes a new run), the engine and its version,
-    and its templates."""
+    and the templates the scene's deck is rendered from."""
     h = hashlib.sha256()
     h.update(case.hash_input().encode())
     params = derive(case) if params is None else params
-    h.update(json.dumps({k: v for k, v in params.items() if k != "files"}, sort_keys=True, default=str).encode())
+    # not hashed: file names, and the pre-run stability report (diagnostics and their wording; the
+    # time step and the monitor limits it leads to are hashed under their own keys)
+    h.update(json.dumps({k: v for k, v in params.items() if k not in ("files", "stability")}, sort_keys=True,
+                        default=str).encode())
     h.update(engine_name.encode())
     h.update(engine_version.encode())
     h.update(templates_hash(engine_name, case.scene.kind).encode())
