@@ -29,8 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-#: accepted overlap of a scanned grain with a wall, as a fraction of its radius
-SLACK = 0.1
+#: accepted overlap of a scanned grain with a wall, as a fraction of its radius. It must cover
+#: the CT equivalent radius of grains in a dense packing, which runs large: +5.7 % on the compare
+#: tests' synthetic scans (3 um voxels, 8-17 voxels across, PSF 0.7 voxel), where contact necks go
+#: to the grains. It must also cover the grain's own load overlap with the wall and the centroid
+#: error. At 0.10, a grain of the smoke shear cell touching the upper plate (3-5 % load overlap)
+#: was refused; hence 0.15.
+SLACK = 0.15
 
 __all__ = ["load_packing", "packing_digest", "apply_initial_packing", "check_initial_packing"]
 
@@ -93,7 +98,9 @@ def check_initial_packing(case, params, pk) -> None:
                             f"{pk['id'][lo[0]]} at z - radius = {x[lo[0], 2] - r[lo[0]]:.4g} m")
         if len(hi):
             problems.append(f"initial_packing: {len(hi)} grain(s) above the upper plate face z = "
-                            f"{g['z_upper_face']:.4g} m, e.g. id {pk['id'][hi[0]]}; raise scene.fill_height or "
+                            f"{g['z_upper_face']:.4g} m, e.g. id {pk['id'][hi[0]]} at r = "
+                            f"{np.hypot(x[hi[0], 0], x[hi[0], 1]):.4g} m, z + radius = {x[hi[0], 2] + r[hi[0]]:.4g} m; "
+                            "raise scene.fill_height or "
                             "lower scene.loose_fraction (they set the upper piston's start)")
     elif "box_lo" in sc and "box_hi" in sc:
         lo, hi = np.asarray(sc["box_lo"]), np.asarray(sc["box_hi"])
