@@ -48,6 +48,9 @@ FEATURES = (
 )
 
 REPO = Path(__file__).resolve().parents[1]
+
+#: engine version per (adapter, executable), probed once per process (Engine.version)
+_VERSIONS: dict = {}
 TEMPLATES = REPO / "templates"
 
 
@@ -94,9 +97,18 @@ class Engine(ABC):
     def available(self) -> bool:
         return shutil.which(self.executable) is not None
 
-    @abstractmethod
     def version(self) -> str:
-        """Engine version string (e.g. ``LIGGGHTS-PUBLIC 3.8.0``)."""
+        """Engine version string (e.g. ``LIGGGHTS-PUBLIC 3.8.0``), probed once per process and
+        executable: get_engine() makes a new adapter every call, and a probe starts the engine
+        (~0.5 s for LIGGGHTS), which every run_dir_for/run_case would otherwise pay."""
+        key = (type(self).__name__, self.executable)
+        if key not in _VERSIONS:
+            _VERSIONS[key] = self._probe_version()
+        return _VERSIONS[key]
+
+    @abstractmethod
+    def _probe_version(self) -> str:
+        """Run the engine to read its version string."""
 
     # -- capabilities ----------------------------------------------------------------------
     def check(self, features: list[str], accepted: dict[str, str]) -> list[Substitution]:

@@ -23,9 +23,6 @@ from .render import render_template
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
 
-#: engine version per (adapter, executable), probed once per process
-_VERSIONS: dict = {}
-
 class Liggghts(Engine):
     name = "liggghts"
     executable = "liggghts"
@@ -73,14 +70,6 @@ class Liggghts(Engine):
                               "each horizontal band, recomputed during the run (scenes/triaxial.py)",
         },
     }
-
-    def version(self) -> str:
-        # cached per executable in the process: get_engine() makes a new adapter every call, so a
-        # per-instance cache missed and every run_dir_for/run_case paid a ~0.5 s engine start-up
-        key = (type(self).__name__, self.executable)
-        if key not in _VERSIONS:
-            _VERSIONS[key] = self._probe_version()
-        return _VERSIONS[key]
 
     def _probe_version(self) -> str:
         try:

@@ -19,9 +19,6 @@ from .render import render_template
 _PROGRESS = re.compile(r"^PROGRESS (\d+)")
 
 
-#: engine version per (adapter, executable), probed once per process
-_VERSIONS: dict = {}
-
 class Yade(Engine):
     name = "yade"
     executable = "yade"
@@ -58,14 +55,6 @@ class Yade(Engine):
                                  "γ_n = sqrt(4/3 E* m*) delivers, instead of force ∝ δ^1/2 δ̇",
         },
     }
-
-    def version(self) -> str:
-        # cached per executable in the process: get_engine() makes a new adapter every call, so a
-        # per-instance cache missed and every run_dir_for/run_case paid a ~0.5 s engine start-up
-        key = (type(self).__name__, self.executable)
-        if key not in _VERSIONS:
-            _VERSIONS[key] = self._probe_version()
-        return _VERSIONS[key]
 
     def _probe_version(self) -> str:
         try:
