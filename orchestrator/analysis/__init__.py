@@ -23,6 +23,7 @@ from ._common import Result, atomic_savefig, atomic_write_csv, atomic_write_json
 from .clusters import analyze_clusters
 from .coordination import analyze_coordination
 from .d2min import analyze_d2min
+from .energy import analyze_energy
 from .displacements import analyze_displacements
 from .fabric import analyze_fabric
 from .forcechains import analyze_forcechains
@@ -47,6 +48,7 @@ ANALYSES = {
     "fabric": analyze_fabric,
     "forcechains": analyze_forcechains,
     "stress": analyze_stress,
+    "energy": analyze_energy,
 }
 
 

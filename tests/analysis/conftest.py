@@ -66,8 +66,11 @@ def make_shear_cell(path, n_frames=6, dtheta=np.radians(0.5), seed=0):
     walls = {"top": {"time": tw, "angle": np.interp(tw, t, angle), "torque": np.c_[0 * tw, 0 * tw, 2e-6 + 0 * tw],
                      "force": np.c_[0 * tw, 0 * tw, 1e-3 + 0 * tw]},
              "bottom": {"time": tw, "force": np.c_[0 * tw, 0 * tw, -1e-2 + 0 * tw]}}
+    # velocities: the finite-difference motion plus a small random agitation (energy analysis)
+    vel = np.gradient(np.nan_to_num(pos), t[1] - t[0], axis=0) + rng.normal(0, 1e-4, pos.shape)
     return write_frames(path, ids, r, t, pos, controls={"angle": angle, "axial_strain": 0.0025 * np.arange(T)},
-                        contacts=contacts, walls=walls, stress=stress)
+                        contacts=contacts, walls=walls, stress=stress, velocity=vel,
+                        mass=2500.0 * 4.0 / 3.0 * np.pi * r ** 3)
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,8 @@ from matplotlib.figure import Figure
 from orchestrator.analysis import ANALYSES, parse_specs, run_analyses
 from orchestrator.analysis import plots
 
-FAST = {"shearband": {"control": "angle", "bins_z": 10}, "profiles": {"bins_z": 10, "bins_r": 5}}
+FAST = {"shearband": {"control": "angle", "bins_z": 10}, "profiles": {"bins_z": 10, "bins_r": 5},
+        "energy": {"youngs_modulus": 63e9, "poisson_ratio": 0.2}}
 
 
 @pytest.fixture(scope="module")
