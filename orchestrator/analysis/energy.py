@@ -111,7 +111,8 @@ def analyze_energy(frames, at=None, control: str | None = None, stride: int | No
 
     Tables: ``summary`` (frame, control, kinetic [J], kinetic_nonaffine [J], elastic [J], ratio,
     ratio_nonaffine, n_contacts). Scalars: ``ratio_max``, ``ratio_median``, ``fraction_above_limit``
-    (of the selected frames), the same two for K'/U, ``limit``.
+    (of the selected frames that have contacts; a frame without contacts has ratio NaN), the same
+    two for K'/U, ``limit``.
     """
     from .plots import plot_energy
     if "velocity" not in frames.fields or not frames.contact_frames:
@@ -136,7 +137,7 @@ def analyze_energy(frames, at=None, control: str | None = None, stride: int | No
         kin = kinetic_energy(frames.mass, vel[k])
         kna = nonaffine_kinetic_energy(frames.mass, frames.position[k], vel[k])
         rows.append({"frame": k, "control": cvals[k], "kinetic": kin, "kinetic_nonaffine": kna, "elastic": u,
-                     "ratio": kin / u if u > 0 else np.inf, "ratio_nonaffine": kna / u if u > 0 else np.inf,
+                     "ratio": kin / u if u > 0 else np.nan, "ratio_nonaffine": kna / u if u > 0 else np.nan,
                      "n_contacts": int(gg.sum())})
     s = pd.DataFrame(rows, columns=["frame", "control", "kinetic", "kinetic_nonaffine", "elastic", "ratio",
                                     "ratio_nonaffine", "n_contacts"])
@@ -145,11 +146,11 @@ def analyze_energy(frames, at=None, control: str | None = None, stride: int | No
     rn = s["ratio_nonaffine"].to_numpy(float)
     fin_n = rn[np.isfinite(rn)]
     return Result("energy", tables={"summary": s},
-                  scalars={"ratio_max": float(np.max(r)) if r.size else np.nan,
+                  scalars={"ratio_max": float(np.max(fin)) if fin.size else np.nan,
                            "ratio_median": float(np.median(fin)) if fin.size else np.nan,
-                           "fraction_above_limit": float(np.mean(r > limit)) if r.size else np.nan,
+                           "fraction_above_limit": float(np.mean(fin > limit)) if fin.size else np.nan,
                            "ratio_nonaffine_median": float(np.median(fin_n)) if fin_n.size else np.nan,
-                           "fraction_nonaffine_above_limit": float(np.mean(rn > limit)) if rn.size else np.nan,
+                           "fraction_nonaffine_above_limit": float(np.mean(fin_n > limit)) if fin_n.size else np.nan,
                            "limit": float(limit), "control": cname},
                   options={"youngs_modulus": E, "poisson_ratio": nu, "limit": limit},
                   plotter=plot_energy)
