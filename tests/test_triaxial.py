@@ -88,6 +88,33 @@ def test_axial_loading(runs, eng):
 
 
 @pytest.mark.parametrize("eng", ENGINES)
+def test_preparation_friction_then_contact_friction(runs, eng):
+    """Stage 1 prepares the sample with ``isotropic.friction`` (0.1 in the smoke case, a denser
+    sample); ``contact.friction`` (0.5) is restored for loading. Measured on the grain-grain
+    contacts carrying more than the median normal force: the 90th percentile of |F_t|/|F_n| sits at
+    the preparation value at the end of stage 1 (measured 0.100 on both engines) and near the
+    contact value during loading (0.45-0.50); LIGGGHTS' ratio includes the tangential dashpot, hence
+    the 10 % margin."""
+    case = load_case(SMOKE)
+    mu_prep, mu = case.scene.isotropic.friction, case.contact.friction
+    assert mu_prep is not None and mu_prep < mu
+    out = outcome(runs, eng)
+    with h5py.File(out.run_dir / "frames.h5") as f:
+        stage = f["frames/stage"][:]
+        ids = f["particles/id"][:]
+        q90 = {}
+        for name, k in (("prep", int(np.flatnonzero(stage == 1)[-1])), ("load", len(stage) - 1)):
+            g = f["contacts"][str(k)]
+            gg = np.isin(g["i"][:], ids) & np.isin(g["j"][:], ids)
+            fn = np.linalg.norm(g["fn"][:][gg], axis=1)
+            ft = np.linalg.norm(g["ft"][:][gg], axis=1)
+            strong = fn > np.median(fn)
+            q90[name] = float(np.quantile(ft[strong] / fn[strong], 0.9))
+    assert 0.8 * mu_prep <= q90["prep"] <= 1.1 * mu_prep, q90
+    assert 0.6 * mu <= q90["load"] <= 1.1 * mu, q90
+
+
+@pytest.mark.parametrize("eng", ENGINES)
 def test_volumetric_strain_two_ways(runs, eng):
     out = outcome(runs, eng)
     with h5py.File(out.run_dir / "frames.h5") as f:

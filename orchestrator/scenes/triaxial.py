@@ -153,6 +153,12 @@ class Isotropic(Strict):
     drag_free_end: bool = Field(True, description="when stage 1 converges with the drag on, switch the drag off and "
                                                   "continue stage 1 until it converges again without it: the loose "
                                                   "sample's collapse then happens before loading, not at its start")
+    friction: float | None = Field(None, ge=0, description="grain-grain friction coefficient during stage 1 (sample "
+                                                       "preparation; None: contact.friction). A lower value gives a "
+                                                       "denser sample, as the seed's vibrated, tapped one (seed 001 "
+                                                       "§2.1); contact.friction is restored when stage 1 ends, which "
+                                                       "leaves the isotropic equilibrium unchanged (a wider Coulomb "
+                                                       "cone admits the same contact forces)")
 
 
 class Membrane(Strict):
@@ -453,6 +459,8 @@ def derive(case, common: dict) -> dict:
                 "v_max": v_iso, "gain": s.isotropic.gain, "ramp_steps": max(1, ramp),
                 "strain_rate_max": rate_iso, "drag_viscosity": nu,
                 "drag_free_end": bool(s.isotropic.drag_free_end and nu > 0),
+                # preparation friction (stage 1), restored to contact.friction for loading
+                "friction": (s.isotropic.friction if s.isotropic.friction is not None else case.contact.friction),
                 "drag_coefficient": 6 * math.pi * nu},
         "dump_every": dump_every, "series_every": series_every,
         "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
