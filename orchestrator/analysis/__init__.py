@@ -32,6 +32,7 @@ from .profiles import analyze_profiles
 from .rdf import analyze_rdf
 from .shearband import analyze_shearband
 from .stress import analyze_stress
+from .triaxial import analyze_triaxial
 
 __all__ = ["ANALYSES", "run_analyses", "parse_specs", "Result"]
 
@@ -49,6 +50,7 @@ ANALYSES = {
     "forcechains": analyze_forcechains,
     "stress": analyze_stress,
     "energy": analyze_energy,
+    "triaxial": analyze_triaxial,
 }
 
 

@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 __all__ = ["plot_d2min", "plot_rdf", "plot_coordination", "plot_clusters", "plot_profiles", "plot_shearband",
            "plot_friction", "plot_displacements", "plot_stress", "plot_fabric", "plot_forcechains",
-           "plot_energy"]
+           "plot_energy", "plot_triaxial"]
 
 MM = 1e3
 
@@ -245,4 +245,24 @@ def plot_energy(res, **kw):
     ax.axhline(res.scalars["limit"], color="k", ls="--", lw=1, label=f"seed 001 §3.2 bound {res.scalars['limit']:g}")
     ax.set_xlabel(res.scalars.get("control", "control")); ax.set_ylabel("K / U")
     ax.legend(fontsize=8)
+    return fig
+
+
+def plot_triaxial(res, others=(), label=None, **kw):
+    """σ1/σ3 (smoothed; raw rows faint) and ε_v against ε_a; ``others``: (label, Result) pairs to overlay."""
+    fig, (a1, a2) = _fig(ncols=2)
+    for k, (lab, r) in enumerate([(label, res), *others]):
+        c = r.tables["curves"]
+        col = f"C{k}"
+        a1.plot(c["axial_strain"], c["stress_ratio"], color=col, alpha=0.2, lw=0.5)
+        a1.plot(c["axial_strain"], c["stress_ratio_smoothed"], color=col, lw=1.5,
+                label=f"{lab + ': ' if lab else ''}peak {r.scalars['peak_stress_ratio']:.2f} "
+                      f"(φ {r.scalars['peak_friction_angle_deg']:.1f}°)")
+        a2.plot(c["axial_strain"], c["volumetric_strain_smoothed"], color=col, lw=1.5, label=lab)
+    a1.set_xlabel("axial strain ε_a"); a1.set_ylabel("σ1/σ3")
+    a2.set_xlabel("axial strain ε_a"); a2.set_ylabel("volumetric strain ε_v (compression > 0)")
+    a2.axhline(0, color="k", lw=0.5)
+    a1.legend(fontsize=8)
+    if others:
+        a2.legend(fontsize=8)
     return fig

@@ -21,7 +21,7 @@ __all__ = ["fig_to_data_uri", "write_run_report", "write_compare_report", "run_c
 #: analyses run by ``orchestrator report`` when neither the case nor the command line names any
 DEFAULT_ANALYSES = {
     "shear_cell": ["profiles", "shearband", "friction", "displacements", "d2min", "rdf", "coordination", "fabric"],
-    "triaxial": ["energy", "displacements", "d2min", "clusters", "rdf", "coordination", "fabric", "stress"],
+    "triaxial": ["triaxial", "energy", "displacements", "d2min", "clusters", "rdf", "coordination", "fabric", "stress"],
     "impact": [],
 }
 

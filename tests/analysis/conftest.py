@@ -65,7 +65,11 @@ def make_shear_cell(path, n_frames=6, dtheta=np.radians(0.5), seed=0):
     tw = np.linspace(0, t[-1], 50)
     walls = {"top": {"time": tw, "angle": np.interp(tw, t, angle), "torque": np.c_[0 * tw, 0 * tw, 2e-6 + 0 * tw],
                      "force": np.c_[0 * tw, 0 * tw, 1e-3 + 0 * tw]},
-             "bottom": {"time": tw, "force": np.c_[0 * tw, 0 * tw, -1e-2 + 0 * tw]}}
+             "bottom": {"time": tw, "force": np.c_[0 * tw, 0 * tw, -1e-2 + 0 * tw]},
+             # a triaxial time series (stage 1 then loading) for the 'triaxial' analysis
+             "triaxial": {"time": tw, "stage": np.where(tw < 0.1, 1.0, 2.0), "axial_strain": 0.2 * tw,
+                          "sigma1": 3e5 * (1 + 2 * np.tanh(20 * tw)), "sigma3": 3e5 + 0 * tw,
+                          "volumetric_strain": -0.1 * tw ** 2, "volume": 1e-6 * (1 + 0.1 * tw ** 2)}}
     # velocities: the finite-difference motion plus a small random agitation (energy analysis)
     vel = np.gradient(np.nan_to_num(pos), t[1] - t[0], axis=0) + rng.normal(0, 1e-4, pos.shape)
     return write_frames(path, ids, r, t, pos, controls={"angle": angle, "axial_strain": 0.0025 * np.arange(T)},
