@@ -185,9 +185,9 @@ class Membrane(Strict):
                                                              "membrane nodes only; grains stay undamped (State.isDamped)")
     contact_damping_lagged: bool = Field(False, description="apply the dashpots with the pressure every update_every "
                                                             "steps (permanent forces) instead of every step: faster")
-    stage2_node_drag: bool = Field(False, description="keep the stage-1 Stokes drag on the membrane nodes (only) "
-                                                     "during axial loading: without it the membrane-grain system "
-                                                     "blew up a few thousand steps into loading")
+    node_drag: bool = Field(False, description="keep the stage-1 Stokes drag on the membrane nodes (only) once the "
+                                               "grains' drag is off (end of stage 1 and loading): numerical damping "
+                                               "of the sheet's own motion")
 
 
 class Lateral(Strict):
@@ -473,7 +473,7 @@ def derive(case, common: dict) -> dict:
                      # relative (membrane-internal) viscosity: critical for a node on a grain contact
                      "damping": m.damping * 2 * math.sqrt(k_contact * m_node),
                      "correction_limit": m.correction_limit, "correction_rows": m.correction_rows,
-                     "correction_gain": m.correction_gain, "stage2_node_drag": m.stage2_node_drag,
+                     "correction_gain": m.correction_gain, "node_drag": m.node_drag,
                      "contact_damping": m.contact_damping, "node_damping": m.node_damping,
                      "contact_damping_lagged": m.contact_damping_lagged},
         "lateral": {"bands": bands, "sectors": s.lateral.sectors, "shell": s.lateral.shell_thickness * d50,
