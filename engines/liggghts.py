@@ -65,6 +65,13 @@ class Liggghts(Engine):
             "epsd2_torsion_torque": "rolling_friction epsd2 with torsionTorque on: the twist loads the rolling "
                                     "spring (same stiffness and limit as rolling, no separate mu_tor)",
         },
+        "placed_clumps": {
+            "inserted_clumps": "the library shapes as particletemplate/multisphere (mass and inertia from the "
+                               "orchestrator's grid integration), the same number of grains of each shape in "
+                               "scene.particles.size_classes volume-mean sizes, inserted by fix insert/pack at random "
+                               "places and orientations into the sample cylinder (not the orchestrator's packing), "
+                               "integrated by fix multisphere (scenes/triaxial.py liggghts_clumps)",
+        },
         "membrane": {
             "shell_pressure": "radial forces p·(band envelope area)·r_i²/Σr_j² on the outer shell of grains of "
                               "each horizontal band, recomputed during the run (scenes/triaxial.py)",
@@ -88,9 +95,9 @@ class Liggghts(Engine):
         for d in ("dump", "restart"):
             (run_dir / d).mkdir(exist_ok=True)
         data = run_dir / "particles.data"
-        if not data.exists():
-            write_data_file(data, run_dir / "particles.txt", params["scene"]["box_lo"], params["scene"]["box_hi"])
         sc = params["scene"]
+        if not data.exists() and not _inserted(params):
+            write_data_file(data, run_dir / "particles.txt", params["scene"]["box_lo"], params["scene"]["box_hi"])
         ctx = {
             "case": case, "p": params, "resume": resume,
             "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
@@ -170,6 +177,8 @@ class Liggghts(Engine):
         segments = dump_segments(run_dir)
         if not segments:
             raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames\n{tail(run_dir / 'engine.log')}")
+        # a scene whose particles the deck inserted writes its particle table from the frames first
+        _scene_hook(case, "liggghts_before_parse", run_dir, params)
         table = read_particle_table(run_dir / "particles.txt")
         ids = table["id"]
         mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
@@ -242,7 +251,18 @@ def dump_columns(case) -> list[str]:
         cols += list(_COLUMNS.get(field, ()))
     if case.output.stress:
         cols += ["radius"] + [f"c_pstress[{k}]" for k in range(1, 7)]
+    if getattr(getattr(case.scene, "particles", None), "shape", None) == "clumps":
+        # inserted clumps: the body each member belongs to (fix multisphere keeps it in the molecule
+        # id), the body's mass (every member carries it) and the member radius (particles.txt and
+        # the clump map are written from the first frame: scenes/triaxial.py liggghts_before_parse)
+        cols += ["mol", "mass"] + ([] if "radius" in cols else ["radius"])
     return cols
+
+
+def _inserted(params) -> bool:
+    """True when the deck inserts its particles itself (no read_data file)."""
+    sc = params.get("scene", {})
+    return bool(sc.get("clumps") and sc["clumps"].get("liggghts"))
 
 
 def _stress_tensors(a: np.ndarray, cols: list[str]) -> np.ndarray:
