@@ -331,6 +331,10 @@ def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, n
     return m, np.concatenate(owner), centres, geo
 
 
+#: inserted clumps (LIGGGHTS): steps over which the platens close on the inserted sample
+CLOSE_STEPS = 100
+
+
 def _prime_at_least(n: int) -> int:
     """The smallest prime >= n (LIGGGHTS wants prime random seeds above 10000)."""
     n = max(int(n), 10007)
@@ -403,6 +407,9 @@ def liggghts_clumps(case, d: np.ndarray) -> dict:
         # LIGGGHTS refuses templates below volume_limit (default 1e-12 m^3, larger than a sand grain)
         "volume_limit": 1e-3 * v_min,
         "mc_tries": 100000, "attempts": P.insertion_attempts,
+        # the platens close on the inserted sample over these steps (one step of insertion first):
+        # a mesh moving at most a bounding radius in 100 steps stays far below the skin per step
+        "close_steps": CLOSE_STEPS, "start_step": 1 + CLOSE_STEPS,
         "volume_error_classes": float(sum(t["count"] * t["volume"] for t in templates)
                                       / np.sum(np.pi / 6 * d ** 3) - 1),
     }
