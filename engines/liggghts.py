@@ -174,11 +174,12 @@ class Liggghts(Engine):
         from orchestrator.frames import FrameWriter
         from orchestrator.particles_io import read_particle_table
         run_dir = Path(run_dir)
+        # a scene whose particles the deck inserted checks the insertion and writes its particle
+        # table from the frames first
+        _scene_hook(case, "liggghts_before_parse", run_dir, params)
         segments = dump_segments(run_dir)
         if not segments:
             raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames\n{tail(run_dir / 'engine.log')}")
-        # a scene whose particles the deck inserted writes its particle table from the frames first
-        _scene_hook(case, "liggghts_before_parse", run_dir, params)
         table = read_particle_table(run_dir / "particles.txt")
         ids = table["id"]
         mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3

@@ -212,6 +212,20 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
         assert np.max(pos[kk][:, 2] + r) < zt[w] + 0.05 * smallest
 
 
+def test_liggghts_incomplete_insertion_stops_with_a_clear_error(tmp_path):
+    """One insertion attempt per clump leaves most of them out: the deck stops right after the
+    insertion and the error names the fix, the counts and the case fields to change."""
+    from engines.base import EngineError
+    from orchestrator.runner import run_case
+    if shutil.which("liggghts") is None:
+        pytest.fail("liggghts is not installed; run `bash .ci/setup`")
+    case = _liggghts_clump_case(grains=100, particles={"shape": "clumps", "library": str(LIB),
+                                                       "insertion_attempts": 1})
+    with pytest.raises(EngineError, match=r"fix ms_ins \(insert/pack\) inserted \d+ of 311 member spheres "
+                                          r"\(100 clumps asked\): raise scene.particles.insertion_attempts"):
+        run_case(case, "liggghts", runs_root=tmp_path, progress=False)
+
+
 def _report(path):
     """YADE's clump report format: body id, mass [kg], 3 principal moments [kg m^2], member ids."""
     rows = [ln.split() for ln in Path(path).read_text().splitlines()]

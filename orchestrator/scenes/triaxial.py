@@ -922,7 +922,8 @@ def liggghts_before_parse(run_dir, params) -> None:
     carries it on the members in the first / last frame, principal moments of inertia [kg m^2] of the
     template it was inserted from (what LIGGGHTS was given), member ids). The orchestrator's placed
     packing (prepare) is kept as ``particles_placed.txt`` / ``clumps_placed.txt``. Stops with the
-    deck's fix named when LIGGGHTS inserted fewer clumps than asked."""
+    deck's fix named when the first frame holds fewer clumps than asked (the deck itself stops with
+    an ERROR line right after an incomplete insertion)."""
     sc = params["scene"]
     C = (sc.get("clumps") or {}).get("liggghts")
     if not C:
@@ -933,6 +934,8 @@ def liggghts_before_parse(run_dir, params) -> None:
     from ..atomic import write_text
     from ..particles_io import read_particle_table, write_particle_table
     run_dir = Path(run_dir)
+    hint = ("raise scene.particles.insertion_attempts or lower scene.packing_fraction (the sample is sized so "
+            "that the clumps' bounding spheres fill it at packing_fraction)")
     cols = json.loads((run_dir / "dump" / "columns.json").read_text())
     frames = list(read_binary_dump(dump_segments(run_dir), len(cols)))
     if not frames:
@@ -944,10 +947,8 @@ def liggghts_before_parse(run_dir, params) -> None:
     bodies = np.unique(mol)
     if len(bodies) != C["count"] or len(ids) != C["members"]:
         raise EngineError(
-            f"{run_dir / 'deck.in'}: fix ms_ins (insert/pack) inserted {len(bodies)} of {C['count']} clumps "
-            f"({len(ids)} of {C['members']} member spheres) into the sample cylinder (first frame, step {step0}): "
-            "raise scene.particles.insertion_attempts or lower scene.packing_fraction (the sample is sized so "
-            "that the clumps' bounding spheres fill it at packing_fraction)")
+            f"{run_dir / 'deck.in'}: fix ms_ins (insert/pack): the first frame (step {step0}) holds {len(bodies)} "
+            f"of {C['count']} clumps ({len(ids)} of {C['members']} member spheres): {hint}")
     placed = run_dir / "particles_placed.txt"
     if not placed.exists():
         os.replace(run_dir / "particles.txt", placed)
