@@ -359,7 +359,8 @@ def liggghts_clumps(case, d: np.ndarray) -> dict:
     LIGGGHTS with ``mass ... inertia_tensor ... use_density`` (LIGGGHTS manual,
     fix_particletemplate_multisphere: "the body's mass and inertia tensor can be specified directly
     via keywords mass and inertia_tensor", only together, with use_volume or use_density); LIGGGHTS
-    still integrates the volume by Monte Carlo (``mc_tries``) for its own bookkeeping and logs it.
+    still runs its Monte Carlo (``mc_tries``) over the template for its own bookkeeping (centre,
+    bounding sphere).
     The weights of ``particledistribution/discrete/numberbased`` are count/n: with
     ``random_distribute exact`` LIGGGHTS inserts exactly these counts (checked on the installed
     binary: 300 bodies of two templates at 40/60 % gave 120/180)."""
@@ -915,8 +916,8 @@ def _frame_positions_yade(run_dir: Path):
 
 def liggghts_before_parse(run_dir, params) -> None:
     """Inserted clumps (substitute ``inserted_clumps``): LIGGGHTS numbered the member spheres it
-    inserted, so the run's particle table and clump map are written from its first frame (taken the
-    step after the insertion): ``particles.txt`` (member id, radius [m], density [kg/m^3], position
+    inserted, so the run's particle table and clump map are written from its first frame (taken when
+    stage 1 starts, after the insertion and the platens' closing; the members have not moved): ``particles.txt`` (member id, radius [m], density [kg/m^3], position
     [m] in that frame), ``clumps.txt`` (member id, clump index 0 ... n-1 = LIGGGHTS body id - 1) and,
     in YADE's format, ``dump/clumps_start.txt`` / ``clumps_end.txt`` (body id, mass [kg] as LIGGGHTS
     carries it on the members in the first / last frame, principal moments of inertia [kg m^2] of the
