@@ -407,6 +407,8 @@ def liggghts_clumps(case, d: np.ndarray) -> dict:
         "seed_distribution": seeds[-2], "seed_insert": seeds[-1],
         # LIGGGHTS refuses templates below volume_limit (default 1e-12 m^3, larger than a sand grain)
         "volume_limit": 1e-3 * v_min,
+        # Monte Carlo tries: a template's mass properties (LIGGGHTS' own bookkeeping; mass and inertia
+        # are given) and the region volume (unused with particles_in_region)
         "mc_tries": 100000, "attempts": P.insertion_attempts,
         # the platens close on the inserted sample over these steps (one step of insertion first):
         # a mesh moving at most a bounding radius in 100 steps stays far below the skin per step
