@@ -133,6 +133,33 @@ def test_liggghts_clumps_need_the_inserted_clumps_substitute(tmp_path):
     assert not (out.run_dir / "particles.data").exists()
 
 
+def test_liggghts_templates_keep_the_shape_mix_and_the_solid_volume():
+    """The size classes of inserted_clumps: equal counts, volume-mean diameters inside the class
+    bounds, the count of every library shape as YADE's draw, the total solid volume; each template's
+    mass is that of its volume-equivalent sphere and its members are centred on the centre of mass."""
+    from orchestrator.scenes.triaxial import _clump_draw, _sample_size, liggghts_clumps
+    case = _liggghts_clump_case()
+    d = _sample_size(case)[3]
+    rho = case.material.density
+    k = _clump_draw(case, d)[0]
+    for K in (1, 3):
+        case.scene.particles.size_classes = K
+        C = liggghts_clumps(case, d)
+        assert len(C["classes"]) == K and sum(c["count"] for c in C["classes"]) == len(d)
+        assert max(c["count"] for c in C["classes"]) - min(c["count"] for c in C["classes"]) <= 1
+        for c in C["classes"]:
+            assert c["d_min"] <= c["diameter"] <= c["d_max"]
+        assert abs(C["volume_error_classes"]) < 1e-12
+        per_shape = np.bincount([t["shape"] for t in C["templates"] for _ in range(t["count"])], minlength=3)
+        assert per_shape.tolist() == np.bincount(k, minlength=3).tolist()
+        for t in C["templates"]:
+            assert t["mass"] == pytest.approx(rho * math.pi / 6 * t["diameter"] ** 3, rel=5e-3)
+            sp = np.array(t["spheres"])
+            assert np.allclose(mass_properties(sp, cells=40)["center"], 0, atol=3e-3 * t["diameter"])
+        if K == 1:
+            assert C["classes"][0]["diameter"] == pytest.approx(np.mean(d ** 3) ** (1 / 3), rel=1e-12)
+
+
 def test_liggghts_triaxial_with_clumps(tmp_path):
     """A short LIGGGHTS triaxial run on inserted clumps (100 grains, 3 isotropic chunks at most, 1 %
     axial strain): every clump inserted with its template's members, the members of every clump keep
