@@ -1,7 +1,9 @@
 """LIGGGHTS-PUBLIC 3.8 adapter (Debian ``liggghts``).
 
 Render: ``templates/liggghts/<scene>.in.j2`` with the derived parameters; particles go in through
-``read_data`` from the orchestrator's particle table. Run: ``liggghts -in deck.in`` (under
+``read_data`` from the orchestrator's particle table, except where the deck inserts them itself
+(clumps: substitute ``inserted_clumps``; the scene's ``liggghts_before_parse`` hook then writes the
+particle table from the frames). Run: ``liggghts -in deck.in`` (under
 ``mpirun -np N`` for N > 1 ranks), progress from thermo lines. Parse: ``dump custom`` text files
 (one per output step, ``dump/frame.<step>.txt``) into frames.h5. Resume: ``restart`` files
 ``restart/state.<step>.restart`` and ``run N upto``.
