@@ -23,7 +23,8 @@ Physics features (the vocabulary scenes use in ``required_features``):
 ``membrane``               flexible membrane with follow-the-surface pressure
 ``clumps``                 rigid clumps of spheres
 ``placed_clumps``          rigid clumps at given positions and orientations (LIGGGHTS-PUBLIC
-                           multisphere bodies only enter through ``fix insert/*``: not offered)
+                           multisphere bodies only enter through ``fix insert/*``: it offers the
+                           substitute ``inserted_clumps``, random places and orientations)
 ``particle_stress``        per-particle stress tensor
 ``contact_output``         contact list with forces
 ``periodic``               periodic boundaries

@@ -1,7 +1,9 @@
 """LIGGGHTS-PUBLIC 3.8 adapter (Debian ``liggghts``).
 
 Render: ``templates/liggghts/<scene>.in.j2`` with the derived parameters; particles go in through
-``read_data`` from the orchestrator's particle table. Run: ``liggghts -in deck.in`` (under
+``read_data`` from the orchestrator's particle table, except where the deck inserts them itself
+(clumps: substitute ``inserted_clumps``; the scene's ``liggghts_before_parse`` hook then writes the
+particle table from the frames). Run: ``liggghts -in deck.in`` (under
 ``mpirun -np N`` for N > 1 ranks), progress from thermo lines. Parse: ``dump custom`` text files
 (one per output step, ``dump/frame.<step>.txt``) into frames.h5. Resume: ``restart`` files
 ``restart/state.<step>.restart`` and ``run N upto``.
@@ -65,6 +67,13 @@ class Liggghts(Engine):
             "epsd2_torsion_torque": "rolling_friction epsd2 with torsionTorque on: the twist loads the rolling "
                                     "spring (same stiffness and limit as rolling, no separate mu_tor)",
         },
+        "placed_clumps": {
+            "inserted_clumps": "the library shapes as particletemplate/multisphere (mass and inertia from the "
+                               "orchestrator's grid integration), the same number of grains of each shape in "
+                               "scene.particles.size_classes volume-mean sizes, inserted by fix insert/pack at random "
+                               "places and orientations into the sample cylinder (not the orchestrator's packing), "
+                               "integrated by fix multisphere (scenes/triaxial.py liggghts_clumps)",
+        },
         "membrane": {
             "shell_pressure": "radial forces p·(band envelope area)·r_i²/Σr_j² on the outer shell of grains of "
                               "each horizontal band, recomputed during the run (scenes/triaxial.py)",
@@ -88,9 +97,9 @@ class Liggghts(Engine):
         for d in ("dump", "restart"):
             (run_dir / d).mkdir(exist_ok=True)
         data = run_dir / "particles.data"
-        if not data.exists():
-            write_data_file(data, run_dir / "particles.txt", params["scene"]["box_lo"], params["scene"]["box_hi"])
         sc = params["scene"]
+        if not data.exists() and not _inserted(params):
+            write_data_file(data, run_dir / "particles.txt", params["scene"]["box_lo"], params["scene"]["box_hi"])
         ctx = {
             "case": case, "p": params, "resume": resume,
             "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
@@ -167,6 +176,9 @@ class Liggghts(Engine):
         from orchestrator.frames import FrameWriter
         from orchestrator.particles_io import read_particle_table
         run_dir = Path(run_dir)
+        # a scene whose particles the deck inserted checks the insertion and writes its particle
+        # table from the frames first
+        _scene_hook(case, "liggghts_before_parse", run_dir, params)
         segments = dump_segments(run_dir)
         if not segments:
             raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames\n{tail(run_dir / 'engine.log')}")
@@ -242,7 +254,18 @@ def dump_columns(case) -> list[str]:
         cols += list(_COLUMNS.get(field, ()))
     if case.output.stress:
         cols += ["radius"] + [f"c_pstress[{k}]" for k in range(1, 7)]
+    if getattr(getattr(case.scene, "particles", None), "shape", None) == "clumps":
+        # inserted clumps: the body each member belongs to (fix multisphere keeps it in the molecule
+        # id), the body's mass (every member carries it) and the member radius (particles.txt and
+        # the clump map are written from the first frame: scenes/triaxial.py liggghts_before_parse)
+        cols += ["mol", "mass"] + ([] if "radius" in cols else ["radius"])
     return cols
+
+
+def _inserted(params) -> bool:
+    """True when the deck inserts its particles itself (no read_data file)."""
+    sc = params.get("scene", {})
+    return bool(sc.get("clumps") and sc["clumps"].get("liggghts"))
 
 
 def _stress_tensors(a: np.ndarray, cols: list[str]) -> np.ndarray:

@@ -1,8 +1,10 @@
 """Clumps from a shape library (issue 4): library validation, the union's mass properties against
-closed forms, placement, the triaxial case option, LIGGGHTS' refusal, and a short YADE triaxial
-run with clumps whose bodies stay rigid and keep their mass and inertia."""
+closed forms, placement, the triaxial case option, LIGGGHTS' substitute ``inserted_clumps`` (refused
+without it), and short YADE and LIGGGHTS triaxial runs with clumps whose bodies stay rigid and
+whose engine mass and inertia match the union integrated here."""
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from pathlib import Path
@@ -99,11 +101,162 @@ def test_case_option_is_validated(tmp_path):
     assert size_range(case)[0] < case.scene.psd.bounds()[0] / 2
 
 
-def test_liggghts_refuses_placed_clumps(tmp_path):
+SUBS = {"liggghts.membrane": "shell_pressure", "liggghts.placed_clumps": "inserted_clumps"}
+
+
+def _liggghts_clump_case(**extra):
+    scene = {"particles": {"shape": "clumps", "library": str(LIB)}}
+    scene.update(extra)
+    return load_case(SMOKE, overrides={"scene": scene, "contact": {"substitutes": SUBS},
+                                       "output": {"angular_velocity": True}})
+
+
+def test_liggghts_clumps_need_the_inserted_clumps_substitute(tmp_path):
+    """Without the substitute a LIGGGHTS clump case stops before it starts, naming the feature and the
+    substitute; with it the deck inserts the library shapes as multisphere bodies (and no nve/sphere
+    integrates their members) and summary.json lists the substitution."""
     from engines.base import UnsupportedFeature
     from orchestrator.runner import run_case
-    with pytest.raises(UnsupportedFeature, match="placed_clumps"):
+    with pytest.raises(UnsupportedFeature, match="placed_clumps.*inserted_clumps"):
         run_case(_clump_case(), "liggghts", runs_root=tmp_path, dry_run=True, progress=False)
+    case = _liggghts_clump_case()
+    out = run_case(case, "liggghts", runs_root=tmp_path, dry_run=True, progress=False)
+    assert {"feature": "placed_clumps", "mechanism": "inserted_clumps"}.items() <= out.summary["substitutions"][1].items()
+    deck = (out.run_dir / "deck.in").read_text()
+    C = json.loads((out.run_dir / "params.json").read_text())["scene"]["clumps"]["liggghts"]
+    assert deck.count("particletemplate/multisphere") == len(C["templates"]) == 9     # 3 shapes x 3 classes
+    assert "fix integrate all multisphere" in deck and "all nve/sphere" not in deck and "read_data" not in deck
+    assert f"particles_in_region {case.scene.grains}" in deck
+    # the classes keep the count of every shape and the total solid volume of the sampled PSD
+    assert sum(t["count"] for t in C["templates"]) == case.scene.grains
+    assert abs(C["volume_error_classes"]) < 1e-12
+    assert not (out.run_dir / "particles.data").exists()
+
+
+def test_liggghts_templates_keep_the_shape_mix_and_the_solid_volume():
+    """The size classes of inserted_clumps: equal counts, volume-mean diameters inside the class
+    bounds, the count of every library shape as YADE's draw, the total solid volume; each template's
+    mass is that of its volume-equivalent sphere and its members are centred on the centre of mass."""
+    from orchestrator.scenes.triaxial import _clump_draw, _sample_size, liggghts_clumps
+    case = _liggghts_clump_case()
+    d = _sample_size(case)[3]
+    rho = case.material.density
+    k = _clump_draw(case, d)[0]
+    for K in (1, 3):
+        case.scene.particles.size_classes = K
+        C = liggghts_clumps(case, d)
+        assert len(C["classes"]) == K and sum(c["count"] for c in C["classes"]) == len(d)
+        assert max(c["count"] for c in C["classes"]) - min(c["count"] for c in C["classes"]) <= 1
+        for c in C["classes"]:
+            assert c["d_min"] <= c["diameter"] <= c["d_max"]
+        assert abs(C["volume_error_classes"]) < 1e-12
+        per_shape = np.bincount([t["shape"] for t in C["templates"] for _ in range(t["count"])], minlength=3)
+        assert per_shape.tolist() == np.bincount(k, minlength=3).tolist()
+        for t in C["templates"]:
+            assert t["mass"] == pytest.approx(rho * math.pi / 6 * t["diameter"] ** 3, rel=5e-3)
+            sp = np.array(t["spheres"])
+            assert np.allclose(mass_properties(sp, cells=40)["center"], 0, atol=3e-3 * t["diameter"])
+        if K == 1:
+            assert C["classes"][0]["diameter"] == pytest.approx(np.mean(d ** 3) ** (1 / 3), rel=1e-12)
+
+
+def test_liggghts_triaxial_with_clumps(tmp_path):
+    """A short LIGGGHTS triaxial run on inserted clumps (100 grains, 3 isotropic chunks at most, 1 %
+    axial strain): every clump inserted with its template's members, the members of every clump keep
+    their distances in every frame, LIGGGHTS' body masses match the union integrated here on the
+    members as they lie in the first frame, its rotational kinetic energy of the bodies
+    (compute erotate/multisphere) matches 1/2 w.I.w with the inertia integrated here, and no member
+    crosses a platen."""
+    from orchestrator.runner import run_case
+    if shutil.which("liggghts") is None:
+        pytest.fail("liggghts is not installed; run `bash .ci/setup`")
+    case = _liggghts_clump_case(grains=100, axial_strain=0.01, frames=4,
+                                isotropic={"max_chunks": 3, "inertial_number": 5e-3})
+    out = run_case(case, "liggghts", runs_root=tmp_path, progress=False)
+    assert out.status == "complete", out.status
+    assert any(s["mechanism"] == "inserted_clumps" for s in out.summary["substitutions"])
+    rd = out.run_dir
+    C = json.loads((rd / "params.json").read_text())["scene"]["clumps"]["liggghts"]
+    rho = case.material.density
+    owner = np.loadtxt(rd / "clumps.txt", ndmin=2).astype(int)
+    with h5py.File(rd / "frames.h5") as f:
+        pos = f["frames/position"][:]
+        omega = f["frames/angular_velocity"][:]
+        steps = f["frames/step"][:]
+        r = f["particles/radius"][:]
+        pid = f["particles/id"][:]
+        zb = f["walls/platen_bottom/position"][:, 2]
+        zt = f["walls/platen_top/position"][:, 2]
+        wstep = np.rint(f["walls/platen_top/time"][:] / json.loads((rd / "params.json").read_text())["dt"])
+    assert pos.shape[0] >= 4 and not np.isnan(pos).any()
+    # number of clumps and members as asked, per template (shape x size class)
+    assert len(np.unique(owner[:, 1])) == case.scene.grains == C["count"]
+    assert len(owner) == len(pid) == C["members"]
+    start = _report(rd / "dump" / "clumps_start.txt")
+    end = _report(rd / "dump" / "clumps_end.txt")
+    row = {int(p): k for k, p in enumerate(pid)}
+    keys = [(t["nspheres"], np.sort([sp[3] for sp in t["spheres"]])) for t in C["templates"]]
+    counts = np.zeros(len(keys), int)
+    for mass, _, mem in start.values():
+        rr = np.sort(r[[row[m] for m in mem]])
+        hit = [k for k, (m, tr) in enumerate(keys) if m == len(rr) and np.allclose(rr, tr, rtol=1e-9, atol=0)]
+        assert len(hit) == 1
+        counts[hit[0]] += 1
+    assert counts.tolist() == [t["count"] for t in C["templates"]]
+    for c in start:                                   # LIGGGHTS keeps each body's mass
+        assert end[c][0] == start[c][0]
+    # rigid bodies: member distances unchanged in every frame
+    worst = 0.0
+    for c in np.unique(owner[:, 1]):
+        rows = [row[int(m)] for m in owner[owner[:, 1] == c, 0]]
+        D = np.linalg.norm(pos[:, rows, None, :] - pos[:, None, rows, :], axis=3)
+        worst = max(worst, float(np.max(np.abs(D - D[0]))) / float(np.max(r[rows])))
+    assert worst < 1e-9, f"member distances changed by {worst:.3g} member radii"
+    # mass: LIGGGHTS' (given from the template's grid integration) vs the union of the members as placed
+    # in the first frame, integrated here on a world-axes grid
+    errs = []
+    for mass, _, mem in start.values():
+        rows = [row[m] for m in mem]
+        errs.append(mass / mass_properties(np.column_stack([pos[0][rows], r[rows]]), density=rho)["mass"] - 1)
+    assert np.max(np.abs(errs)) < 0.01, np.max(np.abs(errs))
+    # inertia: LIGGGHTS' rotational kinetic energy of the bodies in a loaded frame vs 1/2 w.I.w with I
+    # of the members' union in its world orientation (grid integration here; w from the dump)
+    E = np.loadtxt(rd / "dump" / "clump_energy.txt", ndmin=2)
+    k = len(steps) // 2
+    j = int(np.flatnonzero(E[:, 0] == steps[k])[0])
+    e_rot = 0.0
+    for _, _, mem in start.values():
+        rows = [row[m] for m in mem]
+        I = mass_properties(np.column_stack([pos[k][rows], r[rows]]), density=rho, cells=40)["inertia"]
+        w = omega[k][rows[0]]
+        e_rot += 0.5 * w @ I @ w
+    assert E[j, 2] > 0 and E[j, 2] == pytest.approx(e_rot, rel=0.01)
+    # no member crosses a platen (beyond a contact overlap) in any frame
+    smallest = float(r.min())
+    for kk, st in enumerate(steps):
+        w = int(np.argmin(np.abs(wstep - st)))
+        assert np.min(pos[kk][:, 2] - r) > zb[w] - 0.05 * smallest
+        assert np.max(pos[kk][:, 2] + r) < zt[w] + 0.05 * smallest
+
+
+def test_liggghts_incomplete_insertion_stops_with_a_clear_error(tmp_path):
+    """One insertion attempt per clump leaves most of them out: the deck stops right after the
+    insertion and the error names the fix, the counts and the case fields to change."""
+    from engines.base import EngineError
+    from orchestrator.runner import run_case
+    if shutil.which("liggghts") is None:
+        pytest.fail("liggghts is not installed; run `bash .ci/setup`")
+    case = _liggghts_clump_case(grains=100, particles={"shape": "clumps", "library": str(LIB),
+                                                       "insertion_attempts": 1})
+    with pytest.raises(EngineError, match=r"fix ms_ins \(insert/pack\) inserted \d+ of 311 member spheres "
+                                          r"\(100 clumps asked\): raise scene.particles.insertion_attempts"):
+        run_case(case, "liggghts", runs_root=tmp_path, progress=False)
+
+
+def _report(path):
+    """YADE's clump report format: body id, mass [kg], 3 principal moments [kg m^2], member ids."""
+    rows = [ln.split() for ln in Path(path).read_text().splitlines()]
+    return {int(x[0]): (float(x[1]), np.array([float(v) for v in x[2:5]]), [int(v) for v in x[5:]]) for x in rows}
 
 
 def test_yade_triaxial_with_clumps(tmp_path):

@@ -202,13 +202,22 @@ class Particles(Strict):
     """Grain shape: ``spheres`` (default) or ``clumps`` built from a shape library (orchestrator.clumps:
     YAML ``shapes: [{spheres: [[x, y, z, r], ...]}]`` or NPZ ``spheres``/``shape``). Each grain takes a
     random library shape and orientation, scaled to the volume of its sampled PSD diameter; the
-    packing places the clumps' bounding spheres. YADE builds them with ``O.bodies.clump``; LIGGGHTS
-    refuses (``placed_clumps``: multisphere bodies only enter through ``fix insert/*``)."""
+    packing places the clumps' bounding spheres. YADE builds them with ``O.bodies.clump`` at those
+    places (feature ``placed_clumps``). LIGGGHTS-PUBLIC cannot place a multisphere body (they only
+    enter through ``fix insert/*``): with the substitute ``inserted_clumps`` accepted in
+    ``contact.substitutes`` it inserts the same shapes, the same number of grains of each shape, in
+    ``size_classes`` volume-mean sizes, at random places and orientations into the sample cylinder
+    (:func:`liggghts_clumps`)."""
     shape: Literal["spheres", "clumps"] = "spheres"
     library: str | None = Field(None, description="clump library file (.yaml/.yml or .npz); relative paths "
                                                   "are taken from the working directory")
     discretization: int = Field(20, ge=5, le=200, description="YADE clump() grid cells per clump diameter for "
                                                               "the union's mass and inertia")
+    size_classes: int = Field(3, ge=1, le=12, description="LIGGGHTS (inserted_clumps): the sampled diameters are "
+                              "cut into this many equal-count classes, each inserted at its volume-mean diameter "
+                              "(one particletemplate/multisphere per library shape and class)")
+    insertion_attempts: int = Field(500, ge=1, description="LIGGGHTS (inserted_clumps): insert/pack maxattempt, "
+                                    "tries per clump to find a place free of overlaps")
 
     @model_validator(mode="after")
     def _check(self):
@@ -326,6 +335,93 @@ def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, n
            "clump_members": int(len(m)), "clump_bounding_scale": float(f)}
     geo["height0"] = geo["z_top0"] - geo["z_bottom0"]
     return m, np.concatenate(owner), centres, geo
+
+
+#: inserted clumps (LIGGGHTS): steps over which the platens close on the inserted sample
+CLOSE_STEPS = 100
+
+
+def _prime_at_least(n: int) -> int:
+    """The smallest prime >= n (LIGGGHTS wants prime random seeds above 10000)."""
+    n = max(int(n), 10007)
+    while any(n % q == 0 for q in range(2, int(n ** 0.5) + 1)):
+        n += 1
+    return n
+
+
+def liggghts_clumps(case, d: np.ndarray) -> dict:
+    """Substitute ``inserted_clumps`` (LIGGGHTS-PUBLIC 3.8): what the deck needs to insert the grains
+    of volume-equivalent diameters ``d`` [m] as multisphere bodies.
+
+    The grains keep the library shape each one drew in :func:`_clump_draw` (same seed as YADE's
+    placed clumps, so both engines hold the same number of grains of each shape and the same member
+    count). ``particletemplate/multisphere`` has one size per template, so the sorted diameters are
+    cut into ``particles.size_classes`` classes of equal count and every grain of a class takes the
+    class's volume-mean diameter d_c = (mean d^3)^(1/3): the total solid volume and the count of each
+    shape are exact; the spread of d inside a class is lost. One template per (shape, class) with at
+    least one grain: member spheres [m] in the shape's frame, centred on the union's centre of mass,
+    scaled to the volume of d_c; mass [kg] = density x union volume and the inertia tensor [kg m^2]
+    about the centre of mass (:func:`orchestrator.clumps.mass_properties`, 60^3 grid), handed to
+    LIGGGHTS with ``mass ... inertia_tensor ... use_density`` (LIGGGHTS manual,
+    fix_particletemplate_multisphere: "the body's mass and inertia tensor can be specified directly
+    via keywords mass and inertia_tensor", only together, with use_volume or use_density); LIGGGHTS
+    still runs its Monte Carlo (``mc_tries``) over the template for its own bookkeeping (centre,
+    bounding sphere).
+    The weights of ``particledistribution/discrete/numberbased`` are count/n: with
+    ``random_distribute exact`` LIGGGHTS inserts exactly these counts (checked on the installed
+    binary: 300 bodies of two templates at 40/60 % gave 120/180)."""
+    from ..clumps import equivalent_scale, mass_properties
+    P = case.scene.particles
+    lib = _clump_library(P.library)
+    k = _clump_draw(case, d)[0]
+    rho = case.material.density
+    K = max(1, min(P.size_classes, len(d)))
+    groups = np.array_split(np.argsort(d, kind="stable"), K)
+    templates, classes = [], []
+    for c, g in enumerate(groups):
+        dc = float(np.mean(d[g] ** 3) ** (1 / 3))
+        classes.append({"diameter": dc, "count": int(len(g)), "d_min": float(d[g].min()), "d_max": float(d[g].max())})
+        for s in range(len(lib)):
+            count = int(np.sum(k[g] == s))
+            if count == 0:
+                continue
+            sh, (V, com) = lib[s]
+            scale = equivalent_scale(sh, dc, V)
+            sp = np.column_stack([(sh[:, :3] - com) * scale, sh[:, 3] * scale])
+            mp = mass_properties(sp, density=rho)
+            sp[:, :3] -= mp["center"]               # centred on this grid's centre of mass
+            I = mp["inertia"]
+            templates.append({
+                "shape": s, "size_class": c, "diameter": dc, "count": count, "nspheres": int(len(sp)),
+                "spheres": sp.tolist(), "mass": mp["mass"], "volume": mp["volume"],
+                "inertia": [I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]],
+                "principal": mp["principal"].tolist(),
+                "bounding_radius": float(np.max(np.linalg.norm(sp[:, :3], axis=1) + sp[:, 3])),
+            })
+    n = len(d)
+    base = 10007 + 7919 * int(case.seed)
+    seeds = []
+    for _ in range(len(templates) + 2):
+        seeds.append(_prime_at_least(base if not seeds else seeds[-1] + 1))
+    for t, sd in zip(templates, seeds):
+        t["seed"] = sd
+        t["weight"] = t["count"] / n
+    v_min = min(t["volume"] for t in templates)
+    return {
+        "templates": templates, "classes": classes, "count": n,
+        "members": int(sum(t["count"] * t["nspheres"] for t in templates)),
+        "seed_distribution": seeds[-2], "seed_insert": seeds[-1],
+        # LIGGGHTS refuses templates below volume_limit (default 1e-12 m^3, larger than a sand grain)
+        "volume_limit": 1e-3 * v_min,
+        # Monte Carlo tries: a template's mass properties (LIGGGHTS' own bookkeeping; mass and inertia
+        # are given) and the region volume (unused with particles_in_region)
+        "mc_tries": 100000, "attempts": P.insertion_attempts,
+        # the platens close on the inserted sample over these steps (one step of insertion first):
+        # a mesh moving at most a bounding radius in 100 steps stays far below the skin per step
+        "close_steps": CLOSE_STEPS, "start_step": 1 + CLOSE_STEPS,
+        "volume_error_classes": float(sum(t["count"] * t["volume"] for t in templates)
+                                      / np.sum(np.pi / 6 * d ** 3) - 1),
+    }
 
 
 def strain_rate(case) -> float:
@@ -453,6 +549,10 @@ def derive(case, common: dict) -> dict:
                                   "scene.isotropic.inertial_number or set drag: false")
     params = {
         "n": n, "ids": list(range(1, n + 1)), "diameters": d.tolist(),
+        # clumps: the member spheres the engines integrate (same shape draw in both engines)
+        "n_spheres": (None if s.particles.shape != "clumps" else
+                      int(sum(len(_clump_library(s.particles.library)[kk][0])
+                              for kk in _clump_draw(case, d)[0]))),
         "diameter": D, "height": H, "d50": d50, "pressure": p, "axial_strain": s.axial_strain,
         "strain_rate": rate, "inertial_number": s.inertial_number, "shear_steps": shear_steps,
         "iso": {"chunk": iso_chunk, "max_chunks": s.isotropic.max_chunks, "tolerance": s.isotropic.tolerance,
@@ -466,7 +566,8 @@ def derive(case, common: dict) -> dict:
         "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
         "restart_every": 2_000_000_000,    # (int32) no restart files: a triaxial run restarts from scratch
         "platen_friction": s.platen_friction,
-        "clumps": ({"discretization": s.particles.discretization} if s.particles.shape == "clumps" else None),
+        "clumps": ({"discretization": s.particles.discretization, "liggghts": liggghts_clumps(case, d)}
+                   if s.particles.shape == "clumps" else None),
         "membrane": {"n_theta": n_theta, "n_z": n_z, "node_radius": r_node, "E_conn": E_conn,
                      "E_facet": E_facet, "k_contact": k_contact, "node_mass": m_node,
                      "friction": m.friction, "update_every": m.update_every, "density": m.density,
@@ -823,9 +924,91 @@ def _frame_positions_yade(run_dir: Path):
     return np.array(steps), positions
 
 
+def liggghts_before_parse(run_dir, params) -> None:
+    """Inserted clumps (substitute ``inserted_clumps``): LIGGGHTS numbered the member spheres it
+    inserted, so the run's particle table and clump map are written from its first frame (taken when
+    stage 1 starts, after the insertion and the platens' closing; the members have not moved): ``particles.txt`` (member id, radius [m], density [kg/m^3], position
+    [m] in that frame), ``clumps.txt`` (member id, clump index 0 ... n-1 = LIGGGHTS body id - 1) and,
+    in YADE's format, ``dump/clumps_start.txt`` / ``clumps_end.txt`` (body id, mass [kg] as LIGGGHTS
+    carries it on the members in the first / last frame, principal moments of inertia [kg m^2] of the
+    template it was inserted from (what LIGGGHTS was given), member ids). The orchestrator's placed
+    packing (prepare) is kept as ``particles_placed.txt`` / ``clumps_placed.txt``. Stops with the
+    deck's fix named when the first frame holds fewer clumps than asked (the deck itself stops with
+    an ERROR line right after an incomplete insertion)."""
+    sc = params["scene"]
+    C = (sc.get("clumps") or {}).get("liggghts")
+    if not C:
+        return
+    import os
+    from engines.base import EngineError
+    from engines.liggghts import dump_segments, read_binary_dump
+    from ..atomic import write_text
+    from ..particles_io import read_particle_table, write_particle_table
+    run_dir = Path(run_dir)
+    hint = ("raise scene.particles.insertion_attempts or lower scene.packing_fraction (the sample is sized so "
+            "that the clumps' bounding spheres fill it at packing_fraction)")
+    cols = json.loads((run_dir / "dump" / "columns.json").read_text())
+    frames = list(read_binary_dump(dump_segments(run_dir), len(cols)))
+    if not frames:
+        raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames")
+    (step0, a0), (_, a1) = frames[0], frames[-1]
+    col = {c: cols.index(c) for c in ("id", "mol", "mass", "radius", "x", "y", "z")}
+    ids = a0[:, col["id"]].astype(np.int64)
+    mol = a0[:, col["mol"]].astype(np.int64)
+    bodies = np.unique(mol)
+    if len(bodies) != C["count"] or len(ids) != C["members"]:
+        raise EngineError(
+            f"{run_dir / 'deck.in'}: fix ms_ins (insert/pack): the first frame (step {step0}) holds {len(bodies)} "
+            f"of {C['count']} clumps ({len(ids)} of {C['members']} member spheres): {hint}")
+    placed = run_dir / "particles_placed.txt"
+    if not placed.exists():
+        os.replace(run_dir / "particles.txt", placed)
+        if (run_dir / "clumps.txt").exists():
+            os.replace(run_dir / "clumps.txt", run_dir / "clumps_placed.txt")
+    rho = float(read_particle_table(placed)["density"][0])
+    write_particle_table(run_dir / "particles.txt", ids, a0[:, col["radius"]], rho,
+                         a0[:, [col["x"], col["y"], col["z"]]])
+    write_text(run_dir / "clumps.txt", "# member_id clump (LIGGGHTS body id - 1)\n" +
+               "".join(f"{i} {m - 1}\n" for i, m in zip(ids, mol)))
+    # the template of every body: member count and sorted radii (distinct per shape and size class)
+    keys = [(t["nspheres"], np.sort([sp[3] for sp in t["spheres"]])) for t in C["templates"]]
+    r0 = a0[:, col["radius"]]
+
+    def template_of(rows):
+        rr = np.sort(r0[rows])
+        for k, (m, tr) in enumerate(keys):
+            if m == len(rr) and np.allclose(rr, tr, rtol=1e-9, atol=0):
+                return k
+        raise EngineError(f"{run_dir}: a LIGGGHTS body with member radii {rr.tolist()} matches no template")
+
+    by_id1 = {int(i): k for k, i in enumerate(a1[:, col["id"]].astype(np.int64))}
+    start, end = [], []
+    for b in bodies:
+        rows = np.flatnonzero(mol == b)
+        t = C["templates"][template_of(rows)]
+        mem = " ".join(str(int(i)) for i in np.sort(ids[rows]))
+        pr = " ".join("%.17g" % v for v in t["principal"])
+        start.append(f"{b} {a0[rows[0], col['mass']]:.17g} {pr} {mem}\n")
+        r1 = [by_id1[int(i)] for i in ids[rows] if int(i) in by_id1]
+        if r1:
+            end.append(f"{b} {a1[r1[0], col['mass']]:.17g} {pr} {mem}\n")
+    write_text(run_dir / "dump" / "clumps_start.txt", "".join(start))
+    write_text(run_dir / "dump" / "clumps_end.txt", "".join(end))
+
+
 def liggghts_extras(run_dir, params) -> dict:
     steps, positions = _frame_positions_liggghts(run_dir)
-    return compute_extras(run_dir, params, steps, positions)
+    out = compute_extras(run_dir, params, steps, positions)
+    C = (params["scene"].get("clumps") or {}).get("liggghts")
+    if C:                                       # the substitute's figures in the run summary
+        from ..atomic import write_json
+        f = Path(run_dir) / "scene_summary.json"
+        summ = json.loads(f.read_text())
+        summ["clumps"] = {"substitute": "inserted_clumps", "clumps": C["count"], "member_spheres": C["members"],
+                          "templates": len(C["templates"]), "size_classes": C["classes"],
+                          "first_frame_step": int(steps[0])}
+        write_json(f, summ)
+    return out
 
 
 def yade_extras(run_dir, params) -> dict:

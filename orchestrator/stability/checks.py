@@ -239,7 +239,8 @@ def monitor_limits(case, params: dict, report: dict) -> dict:
     out = {"enabled": bool(o.monitors), "every": max(1, steps // o.monitor_checks) if steps else 1000,
            "ke_limit": o.ke_factor * ke_scale, "ke_scale": ke_scale,
            "overlap_limit": overlap_limit, "r_min": r_min,
-           "n_particles": n, "wall_force_target": inp.get("wall_force_target"),
+           # spheres the engine integrates: a clump scene's member spheres (scene key n_spheres)
+           "n_particles": int(sc.get("n_spheres") or n), "wall_force_target": inp.get("wall_force_target"),
            "wall_force_factor": o.wall_force_factor}
     if sc.get("box_lo") is not None:
         out["box_lo"], out["box_hi"] = list(sc["box_lo"]), list(sc["box_hi"])
