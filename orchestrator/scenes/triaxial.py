@@ -141,7 +141,9 @@ class Isotropic(Strict):
     """Stage 1: pressure ramp, axial servo, convergence test."""
     inertial_number: float = Field(1e-3, gt=0, le=0.1,
                                    description="sets the servo's largest platen speed v_max = I/(d√(ρ/p))·H")
-    gain: float = Field(5.0, gt=0, description="servo gain g in v = -v_max clip(g(1-σ_top/p), -1, 1)")
+    gain: float | None = Field(None, gt=0, description="servo gain g in v = -v_max clip(g(1-σ_top/p), -1, 1); None: "
+                                                       "half the servo's stability limit g_c (derive(): above g_c "
+                                                       "the platen overshoots every update, the sample is hammered)")
     ramp_steps: int | None = Field(None, ge=0, description="steps over which p is ramped up (None: derived)")
     tolerance: float = Field(0.01, gt=0, lt=0.5, description="|σ/p - 1| to end the stage (chunk averages)")
     max_chunks: int = Field(60, ge=1)
@@ -536,6 +538,21 @@ def derive(case, common: dict) -> dict:
     a_node = math.pi * D * H / (n_theta * n_z)
     m_node = max(m.density * m.thickness * a_node, 2.0 * k_contact * (dt / 0.2) ** 2)
     total_iso = iso_chunk * s.isotropic.max_chunks
+    # --- stage-1 servo gain: the discrete loop v_n = -v_max g (1 - F_n/(pA)), F_{n+1} = F_n - K v_n n_s dt
+    # multiplies the force error by (1 - g/g_c) per update, g_c = pA / (v_max n_s dt K); the platen's
+    # stiffness K ~ (A/d50^2) k_hertz (one d50 grain per d50^2 of platen, each at F = p d50^2), so
+    # g_c = p d50^2 / (v_max n_s dt k_hertz). Above g_c the platen overshoots at every update (an
+    # even/odd-step oscillation that hammers the sample: seen on LIGGGHTS clumps at g = 5); above
+    # 2 g_c it diverges up to the speed clip. Default: g = g_c / 2, a response in ~2 updates.
+    servo_every = int(max(1, min(series_every, 0.1 * delta / (v_iso * dt))))
+    gain_critical = p * d50 ** 2 / (v_iso * servo_every * dt * k_hertz)
+    gain = s.isotropic.gain if s.isotropic.gain is not None else 0.5 * gain_critical
+    if gain >= gain_critical:
+        from ..derive import DerivationError
+        raise DerivationError(f"scene.isotropic.gain = {gain:.3g} is at or above the servo's stability limit "
+                              f"g_c = {gain_critical:.3g} (p d50^2 / (v_max n dt k), docs/triaxial.md): the platen "
+                              f"would overshoot at every update; use a gain below {gain_critical:.3g} or leave it "
+                              "out (default g_c/2)")
     # stage-1 drag (same law in both engines): terminal speed v_t = I_iso sqrt(p/rho) for F = p d50^2
     v_t = s.isotropic.drag_inertial_number * math.sqrt(p / rho)
     nu = p * d50 / (3 * math.pi * v_t) if s.isotropic.drag else 0.0
@@ -556,7 +573,7 @@ def derive(case, common: dict) -> dict:
         "diameter": D, "height": H, "d50": d50, "pressure": p, "axial_strain": s.axial_strain,
         "strain_rate": rate, "inertial_number": s.inertial_number, "shear_steps": shear_steps,
         "iso": {"chunk": iso_chunk, "max_chunks": s.isotropic.max_chunks, "tolerance": s.isotropic.tolerance,
-                "v_max": v_iso, "gain": s.isotropic.gain, "ramp_steps": max(1, ramp),
+                "v_max": v_iso, "gain": gain, "gain_critical": gain_critical, "ramp_steps": max(1, ramp),
                 "strain_rate_max": rate_iso, "drag_viscosity": nu,
                 "drag_free_end": bool(s.isotropic.drag_free_end and nu > 0),
                 # preparation friction (stage 1), restored to contact.friction for loading
@@ -583,7 +600,7 @@ def derive(case, common: dict) -> dict:
         "series_columns": list(SERIES_COLUMNS),
         # servo update period: the platen moves at most ~ one tenth of a d50 grain's contact
         # overlap at p per update
-        "servo_every": int(max(1, min(series_every, 0.1 * delta / (v_iso * dt)))),
+        "servo_every": servo_every,
     }
     return params
 
