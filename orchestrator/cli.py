@@ -58,6 +58,10 @@ def cmd_run(args) -> int:
             tag = "reused" if out.reused else s["status"]
             con.print(f"[green]{eng}[/green]: {tag} {out.run_dir} — engine {wt.get('engine', 0):.1f} s, "
                       f"total {wt.get('total', 0):.1f} s")
+            r = s.get("resumed_from")
+            if r and not out.reused:
+                at = f" (step {r['step']})" if r.get("step") is not None else ""
+                con.print(f"  resumed from {r.get('restart_file') or r.get('checkpoint')}{at}")
         for sub in s.get("substitutions", []):
             con.print(f"  substitution: {sub['feature']} -> {sub['mechanism']}: {sub['note']}")
     return status

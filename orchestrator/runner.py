@@ -174,6 +174,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     params, subs = prepare(case, engine_name, run_dir, params)
     prior = read_summary(run_dir) or {}
     resume = None if dry_run or prior.get("status") not in ("running", "failed") else eng.resume_state(run_dir)
+    if not dry_run:
+        resume = _scene_resume(case, engine_name, run_dir, resume)
     if resume and hasattr(eng, "prepare_resume"):
         eng.prepare_resume(run_dir, resume)
     deck = eng.render(case, params, run_dir, resume=resume)
@@ -198,7 +200,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     t1 = time.perf_counter()
     from .stability.monitors import read_verdict
     try:
-        res = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress)
+        res, resume = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress)
+        summary["resumed_from"] = resume
     except EngineError as exc:
         unstable = read_verdict(run_dir, params["dt"], failed=True)
         if unstable is not None:
@@ -259,17 +262,27 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
     candidates = (resume or {}).get("candidates", [])
     for cand in candidates[1:] + [None]:
         try:
-            return eng.run(deck, case, total, log, timeout, progress)
+            return eng.run(deck, case, total, log, timeout, progress), resume
         except EngineError:
             if resume is None:
                 raise
             write_text(log.with_suffix(".resume-failed.log"), log.read_text(errors="replace") if log.exists() else "")
             resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand,
                                                     step=_restart_step(cand, resume))
+            resume = _scene_resume(case, eng.name, run_dir, resume)
             if resume is not None and hasattr(eng, "prepare_resume"):
                 eng.prepare_resume(run_dir, resume)
             deck = eng.render(case, params, run_dir, resume=resume)
     raise EngineError("unreachable")  # pragma: no cover
+
+
+def _scene_resume(case, engine_name: str, run_dir: Path, resume: dict | None) -> dict | None:
+    """Let the scene check and complete the engine's resume point (``resume_point(engine, run_dir,
+    resume)`` in the scene module: e.g. the stage state a deck needs to re-enter the right stage);
+    it may return None (start afresh) and tidies the run directory for the chosen point."""
+    from .scenes import scene_module
+    hook = getattr(scene_module(case.scene.kind), "resume_point", None)
+    return hook(engine_name, Path(run_dir), resume) if hook else resume
 
 
 def _restart_step(cand: str, resume: dict) -> int:
