@@ -894,7 +894,11 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
         summ["isotropic_end"] = {"sigma1": s1i, "sigma3": s3i, "stress_ratio": s1i / s3i,
                                  "sigma3_error": s3i / p - 1, "sigma1_error": s1i / p - 1,
                                  "applied_pressure": float(np.mean(s["pressure"][last_iso])),
-                                 "steps": int(st[a["k0"]])}
+                                 "steps": int(st[a["k0"]]),
+                                 # both chunk means within isotropic.tolerance of p (else stage 1 ended
+                                 # at isotropic.max_chunks and loading started from this state)
+                                 "converged": bool(abs(s1i / p - 1) < sc["iso"]["tolerance"]
+                                                   and abs(s3i / p - 1) < sc["iso"]["tolerance"])}
     if shear.any():
         # lateral stress stray during shear, on averages over one series window of 10 rows
         e3 = a["sigma3"][shear] / p - 1
