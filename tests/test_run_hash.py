@@ -51,3 +51,17 @@ def test_run_hash_ignores_the_stability_report_wording():
     assert run_hash(case, "liggghts", "3.8.0", params) == h
     params["dt"] = params["dt"] * 0.5
     assert run_hash(case, "liggghts", "3.8.0", params) != h
+
+
+def test_complete_run_drops_its_resume_points(tmp_path):
+    """A complete run no longer needs its restart files and checkpoints: drop_resume_points removes
+    exactly those and reports the bytes freed."""
+    from orchestrator.runner import drop_resume_points
+    (tmp_path / "restart").mkdir()
+    for name, size in (("restart/state.100.restart", 10), ("restart/state.200.restart", 20),
+                       ("checkpoint.yade.gz", 30)):
+        (tmp_path / name).write_bytes(b"x" * size)
+    (tmp_path / "restart" / "state.txt").write_text("100 1 0 1 0 0 0 0\n")
+    (tmp_path / "frames.h5").write_bytes(b"keep")
+    assert drop_resume_points(tmp_path) == 60
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["frames.h5", "state.txt"]
