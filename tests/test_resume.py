@@ -2,9 +2,6 @@
 ends with the same frames as an uninterrupted run."""
 from __future__ import annotations
 
-import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -14,6 +11,7 @@ import numpy as np
 import pytest
 
 from orchestrator.frames import Frames
+from resume_util import kill_run, rerun_resumes
 
 pytestmark = pytest.mark.engine
 REPO = Path(__file__).resolve().parents[1]
@@ -52,19 +50,9 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
         assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
         time.sleep(0.2)
     assert run_dir is not None, "no restart written within 120 s"
-    os.killpg(proc.pid, signal.SIGKILL)                 # the orchestrator dies...
-    proc.wait()
-    time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
-    summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["status"] == "running"
-    assert not (run_dir / "frames.h5").exists()
-
-    done = subprocess.run(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["status"] == "complete"
-    assert summary["resumed_from"], "the second run started afresh instead of resuming"
+    kill_run(proc, run_dir)
+    rerun_resumes(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
+                  run_dir, timeout=600)
 
     ref_runs = tmp_path / "ref"
     ref = subprocess.run(orchestrator("run", str(case), "--engine", engine, "--runs", str(ref_runs), "--quiet"),

@@ -14,8 +14,6 @@ smoothed σ3 stray within 0.03 (the floor is 0.10).
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -25,6 +23,7 @@ import numpy as np
 import pytest
 
 from orchestrator.frames import Frames
+from resume_util import kill_run, rerun_resumes
 
 pytestmark = pytest.mark.engine
 REPO = Path(__file__).resolve().parents[1]
@@ -92,21 +91,12 @@ def test_killed_triaxial_resumes(engine, tmp_path, engines_installed):
         assert proc.poll() is None, "the run ended before it could be killed during loading"
         time.sleep(0.1)
     assert point is not None, "no resume point written during loading"
-    os.killpg(proc.pid, signal.SIGKILL)                 # the orchestrator dies...
-    proc.wait()
-    time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
-    summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["status"] == "running"
-    assert not (run_dir / "frames.h5").exists()
+    kill_run(proc, run_dir)
 
     t1 = time.time()
-    done = subprocess.run(orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(runs), "--quiet"),
-                          capture_output=True, text=True, timeout=2400)
-    assert done.returncode == 0, done.stdout + done.stderr
+    summary = rerun_resumes(orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(runs), "--quiet"),
+                            run_dir, timeout=2400)
     resumed_wall = time.time() - t1
-    summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["status"] == "complete"
-    assert summary["resumed_from"], "the second run started afresh instead of resuming"
     log = (run_dir / "engine.log").read_text(errors="replace")
     if engine == "liggghts":
         st = summary["resumed_from"]["scene_state"]

@@ -172,6 +172,9 @@ class Membrane(Strict):
     spacing: float = Field(3.0, gt=0.2, description="node spacing / d50 (3: facets bridge the surface voids like the "
                                                     "latex sheet, whose bending stiffness the GridNode mesh lacks; "
                                                     "1.5 let the membrane sink into the voids, docs/triaxial.md)")
+    theta_spacing: float | None = Field(None, gt=0.2, description="node spacing around the sample / d50 (None: "
+                                                                  "spacing); smaller values flatten the angle between "
+                                                                  "neighbouring facets (30 deg for the 12-sided minimum)")
     node_radius: float = Field(0.15, gt=0, le=0.5, description="node (= half sheet thickness) radius / d50")
     contact_stiffness: float = Field(1.0, gt=0, description="grain-membrane kn as a multiple of the Hertz "
                                                               "tangent stiffness of a d50 grain on a flat wall at p")
@@ -531,7 +534,7 @@ def derive(case, common: dict) -> dict:
     # spacing L has a 2-D modulus ~ k: E_c = E_m t / r_node
     E_conn = m.youngs_modulus * m.thickness / r_node
     spacing = m.spacing * d50
-    n_theta = max(12, int(round(math.pi * D / spacing)))
+    n_theta = max(12, int(round(math.pi * D / ((m.theta_spacing or m.spacing) * d50))))
     n_z = max(4, int(round(H / spacing)))
     # node mass: the sheet's own mass, raised if needed so that a node on a grain contact is
     # stable at dt (m >= k (dt/0.2)^2)

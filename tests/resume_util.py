@@ -1,0 +1,30 @@
+"""Shared steps of the kill-and-resume tests (tests/test_resume.py, tests/test_triaxial_resume.py)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+
+def kill_run(proc: subprocess.Popen, run_dir: Path) -> None:
+    """Kill an ``orchestrator run`` started with ``start_new_session=True`` (its engine dies with it
+    through PDEATHSIG) and check the run is left interrupted: status ``running``, no frames.h5."""
+    os.killpg(proc.pid, signal.SIGKILL)                 # the orchestrator dies...
+    proc.wait()
+    time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "running"
+    assert not (run_dir / "frames.h5").exists()
+
+
+def rerun_resumes(cmd: list[str], run_dir: Path, timeout: float) -> dict:
+    """Run the same command again; it must complete by resuming (summary ``resumed_from`` set)."""
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, done.stdout + done.stderr
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "complete"
+    assert summary["resumed_from"], "the second run started afresh instead of resuming"
+    return summary
