@@ -236,7 +236,7 @@ def test_monitors_watch_the_smoke_runs(runs, eng):
 
 #: the smoke floors on a second packing (seed 2), YADE: before stage 1 ended without the drag
 #: (isotropic.drag_free_end) its lateral stress strayed 0.128; then 0.035 (Δε_v 0.010); with the
-#: preparation friction 0.1 (a dense sample) 0.017 (Δε_v 0.002)
+#: preparation friction 0.1 (a dense sample) 0.017 (Δε_v 0.002); with the derived servo gain 0.015 (0.001)
 @pytest.fixture(scope="module")
 def yade_seed2(tmp_path_factory):
     from orchestrator.runner import run_case
