@@ -1005,10 +1005,13 @@ def liggghts_before_parse(run_dir, params) -> None:
     hint = ("raise scene.particles.insertion_attempts or lower scene.packing_fraction (the sample is sized so "
             "that the clumps' bounding spheres fill it at packing_fraction)")
     cols = json.loads((run_dir / "dump" / "columns.json").read_text())
-    frames = list(read_binary_dump(dump_segments(run_dir), len(cols)))
-    if not frames:
+    first = last = None
+    for frame in read_binary_dump(dump_segments(run_dir), len(cols)):    # only the first and last are kept
+        first = first or frame
+        last = frame
+    if first is None:
         raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames")
-    (step0, a0), (_, a1) = frames[0], frames[-1]
+    (step0, a0), (_, a1) = first, last
     col = {c: cols.index(c) for c in ("id", "mol", "mass", "radius", "x", "y", "z")}
     ids = a0[:, col["id"]].astype(np.int64)
     mol = a0[:, col["mol"]].astype(np.int64)
