@@ -62,9 +62,24 @@ def cmd_run(args) -> int:
             if r and not out.reused:
                 at = f" (step {r['step']})" if r.get("step") is not None else ""
                 con.print(f"  resumed from {r.get('restart_file') or r.get('checkpoint')}{at}")
+            if s.get("status") == "complete" and not args.no_report:
+                _closing_results(out.run_dir, con)
         for sub in s.get("substitutions", []):
             con.print(f"  substitution: {sub['feature']} -> {sub['mechanism']}: {sub['note']}")
     return status
+
+
+def _closing_results(run_dir, con) -> None:
+    """After a complete run: write report.html in the run directory (if missing) and print the
+    key results with where the frames, figures and report are."""
+    from .compare.report import write_run_report
+    from .results import print_key_results
+    if not (run_dir / "report.html").exists():
+        try:
+            write_run_report(run_dir)
+        except (OSError, ValueError, KeyError) as exc:     # the run is complete; the page is a convenience
+            con.print(f"  [yellow]report.html not written: {exc}[/yellow]")
+    print_key_results(run_dir, con)
 
 
 def cmd_engines(args) -> int:
@@ -169,6 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--dry-run", action="store_true", help="render decks and estimate run time only")
     r.add_argument("--runs", default="runs", help="runs directory (default: ./runs)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--no-report", action="store_true",
+                   help="do not write report.html nor print the results table at the end")
     r.set_defaults(func=cmd_run)
 
     v = sub.add_parser("validate", help="validate a case file and show its derived time step")

@@ -200,3 +200,27 @@ def results_frame(run_dir) -> pd.DataFrame:
     if len(df):
         df.insert(1, "text", [r.text() for r in rows])
     return df
+
+
+def print_key_results(run_dir, console) -> None:
+    """Print the key results of ``run_dir`` as a short table on a rich ``console``, followed by
+    where the frames, the figures and the report are."""
+    from rich.table import Table
+    run_dir = Path(run_dir)
+    rows = key_results(run_dir)
+    t = Table(title=f"results: {run_dir}", title_justify="left", show_lines=False)
+    for col in ("quantity", "value", "seed paper / note"):
+        t.add_column(col)
+    for r in rows:
+        val = r.text()
+        if r.ok is False:
+            val = f"[red]{val}[/red]"
+        t.add_row(r.quantity, val, r.seed)
+    console.print(t)
+    adir = run_dir / "analysis"
+    pngs = sorted(p.name for p in adir.glob("*.png")) if adir.is_dir() else []
+    console.print(f"  frames:  {run_dir / 'frames.h5'}")
+    if pngs:
+        console.print(f"  figures: {adir}/ ({', '.join(pngs)})")
+    if (run_dir / "report.html").exists():
+        console.print(f"  report:  {run_dir / 'report.html'}")
