@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 
@@ -165,7 +164,3 @@ def add_parsers(sub) -> None:
     r.add_argument("--rerun", action="store_true", help="recompute analyses already in RUN/analysis")
     r.set_defaults(func=cmd_report)
 
-
-if __name__ == "__main__":  # pragma: no cover
-    from ..cli import main
-    sys.exit(main(sys.argv[1:]))
