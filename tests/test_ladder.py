@@ -57,3 +57,21 @@ def test_single_contact_explanation_matches_the_derivation():
     assert sc.loc[("adhesion", "yade"), "ξ/ξ_σ = 10"] == pytest.approx(1.0, rel=1e-12)   # DMT exact
     assert sc.loc[("rolling limit", "liggghts"), "ξ/ξ_σ = 0.1"] == pytest.approx(math.sqrt(10), rel=1e-9)
     assert np.isinf(sc.loc[("torsion limit", "yade"), "ξ/ξ_σ = 1"])
+
+
+@pytest.mark.engine
+def test_smoke_ladder_l0_on_both_engines(tmp_path):
+    """CI rung: the shear cell smoke case at L0 (Hertz-Mindlin + Coulomb, restitution damping) on
+    both engines from the same packing. The smoke case is not physics (4 degrees of shear, ~300
+    grains: mu_macro is noise), but the packing's compression is: the final piston height and the
+    band position must agree within the L0 floor (5 %)."""
+    from orchestrator.compare.ladder import run_ladder
+    res = run_ladder(CASES / "shear_cell_smoke.yaml", seeds=[1], runs_root=tmp_path, workers=1, rungs=["L0"])
+    assert set(res.runs["status"]) == {"complete"}, res.runs[["engine", "status", "error"]]
+    comp = res.comparison.set_index("observable")
+    for obs in ("mu_macro", "piston_z", "shearband_z", "shearband_width", "density_profile"):
+        assert obs in comp.index
+    assert comp.loc["piston_z", "relative difference"] <= 0.05
+    assert comp.loc["shearband_z", "relative difference"] <= 0.05
+    for f in ("comparison", "runs", "stats", "plot"):
+        assert Path(res.files[f]).exists()

@@ -67,10 +67,11 @@ def cmd_ladder(args, con) -> int:
                   + (f" ({row['error']})" if row.get("error") else ""))
 
     res = run_ladder(args.case, engines=args.engine, seeds=args.seeds, runs_root=args.runs,
-                     scheduler=args.scheduler, workers=args.workers, out_dir=args.out, progress=progress)
-    t = Table(title=f"cross-validation ladder: {res.case}")
+                     scheduler=args.scheduler, workers=args.workers, out_dir=args.out, progress=progress,
+                     rungs=args.rung)
+    t = Table(title=f"cross-validation ladder: {res.case} (A vs B per row; scatter = 2 sem of the seeds, relative)")
     for col in ("rung", "engines", "observable", "A", "B", "|A−B|/mean", "scatter", "floor", "ok"):
-        t.add_column(col)
+        t.add_column(col, no_wrap=True)
     for _, r in res.comparison.iterrows():
         if r["observable"] == "density_profile":
             a = b = "profile"
@@ -80,6 +81,8 @@ def cmd_ladder(args, con) -> int:
         floor = "" if r["floor"] is None or r["floor"] != r["floor"] else f"{r['floor']:.3g}"
         t.add_row(r["rung"], r["engines"], r["observable"], a, b, f"{100 * r['relative difference']:.1f} %",
                   f"{100 * r['scatter (2 sem, relative)']:.1f} %", floor, ok)
+    if not con.is_terminal:
+        con.width = max(con.width, 150)       # a log keeps every column whole
     con.print(t)
     con.print(f"engines part at: {res.parts_at or 'no rung (every difference within its floor or the scatter)'}")
     if len(res.explanation):
@@ -150,6 +153,8 @@ def add_parsers(sub) -> None:
     x.add_argument("--ladder", action="store_true", help="the physics ladder L0 (Hertz-Mindlin + Coulomb) .. L4 "
                    "(full case) on every engine and seed, with run-to-run scatter (docs/crossval.md)")
     x.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="packings per rung and engine (--ladder)")
+    x.add_argument("--rung", action="append", choices=["L0", "L1", "L2", "L3", "L4"],
+                   help="run only this rung (repeatable; --ladder; default every rung the case has)")
     x.add_argument("--engine", action="append", help="engine for --ladder (repeatable; default the case's engines)")
     x.add_argument("--scheduler", help="Dask scheduler address for --ladder (default: local processes)")
     x.add_argument("--workers", type=int, help="local worker processes for --ladder (default one per core)")

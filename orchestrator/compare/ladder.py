@@ -122,14 +122,15 @@ def _flatten(obs: dict) -> dict:
 
 
 def run_ladder(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", scheduler=None, workers=None,
-               out_dir=None, progress=None) -> LadderResult:
-    """Run every rung of ``case_path`` on every engine for every seed (reusing complete runs),
-    then compare (:func:`compare_rungs`) and write ``ladder.csv``, ``ladder_runs.csv`` and
-    ``ladder.png`` into ``out_dir`` (default ``runs/<case>/ladder``)."""
+               out_dir=None, progress=None, rungs=None) -> LadderResult:
+    """Run every rung of ``case_path`` (or only those named in ``rungs``) on every engine for every
+    seed (reusing complete runs), then compare (:func:`compare_rungs`) and write ``ladder.csv``,
+    ``ladder_runs.csv`` and ``ladder.png`` into ``out_dir`` (default ``runs/<case>/ladder``)."""
     case = load_case(case_path)
     engines = list(engines or case.engines)
+    todo = [(r, ov) for r, ov in rungs_for(case_path) if rungs is None or r.name in rungs]
     tasks = []
-    for rung, ov in rungs_for(case_path):
+    for rung, ov in todo:
         for seed in seeds:
             for eng in engines:
                 tasks.append({"case": str(case_path), "overrides": dict(ov, seed=int(seed)), "engine": eng,
@@ -148,7 +149,7 @@ def run_ladder(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", sched
     finally:
         ex.close()
     runs = pd.DataFrame(rows)
-    res = compare_rungs(runs, [r.name for r, _ in rungs_for(case_path)])
+    res = compare_rungs(runs, [r.name for r, _ in todo])
     res.case = case.name
     res.explanation = explain(case_path, res.parts_at, runs)
     out_dir = Path(out_dir) if out_dir else Path(runs_root) / case.name / "ladder"
