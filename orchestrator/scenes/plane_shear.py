@@ -33,6 +33,7 @@ from pydantic import Field, field_validator
 from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError
 from ..units import Pressure
+from . import base
 from .shear_cell import PSD
 
 CONTROLS: tuple[str, ...] = ("strain", "stage")
@@ -300,7 +301,7 @@ def _strain_of_step(params, steps):
 def _controls(params, steps) -> dict:
     sc = params["scene"]
     lookup = dict(zip(sc["frame_steps"], sc["frame_stage"]))
-    return {"strain": _strain_of_step(params, steps),
+    return {"shear_strain": _strain_of_step(params, steps),
             "stage": np.array([lookup.get(int(s), np.nan) for s in steps], float)}
 
 
@@ -315,29 +316,6 @@ def _walls(params, a: np.ndarray) -> dict:
     return {"top": {"time": t, "position": np.column_stack([zero, zero, z]), "force": a[:, 2:5],
                     "strain": _strain_of_step(params, a[:, 0])},
             "bottom": {"time": t, "force": a[:, 5:8]}}
-
-
-def liggghts_extras(run_dir, params) -> dict:
-    run_dir = Path(run_dir)
-    rows = [np.loadtxt(f, comments="#", ndmin=2) for f in sorted(run_dir.glob("walls.*.txt"))]
-    rows = [r for r in rows if r.size]
-    out = {"controls": _controls(params, params["scene"]["frame_steps"])}
-    if rows:
-        out["walls"] = _walls(params, np.vstack(rows))
-    return out
-
-
-def yade_extras(run_dir, params) -> dict:
-    run_dir = Path(run_dir)
-    rows = [np.load(f) for f in sorted(run_dir.glob("walls.yade.*.npy"))]
-    rows = [r for r in rows if r.size]
-    steps = []
-    for c in sorted((run_dir / "dump").glob("chunk.*.npz")):
-        steps += [int(i) for i in np.load(c)["iter"]]
-    out = {"controls": _controls(params, sorted(set(steps)))}
-    if rows:
-        out["walls"] = _walls(params, np.vstack(rows))
-    return out
 
 
 def mu_macro_series(frames) -> "pd.DataFrame":
@@ -383,3 +361,30 @@ def frames_target(frames) -> float | None:
         return float(str(s["normal_stress"]).split()[0]) * L * L
     except Exception:
         return None
+
+
+class PlaneShearScene(base.Scene):
+    """Periodic plane shear between two rough walls (module docstring). Controls per frame: the
+    imposed ``shear_strain`` (γ = v_shear t / h) and the protocol ``stage``; wall series ``top``
+    (with its ``strain``) and ``bottom``."""
+    kind = "plane_shear"
+    section = Scene
+    honoured = frozenset({"contact.adhesion", "contact.rolling", "contact.torsion", "gravity", "initial_packing"})
+    controls = {"shear_strain": "1", "stage": "1"}
+    #: the decks' wall sampler: step, z_top, Fx Fy Fz on the top wall, Fx Fy Fz on the bottom wall
+    wall_columns = ("step", "z_top", "fx_top", "fy_top", "fz_top", "fx_bottom", "fy_bottom", "fz_bottom")
+    observables = ("mu_macro",)
+
+    required_features = staticmethod(required_features)
+    derive = staticmethod(derive)
+    max_velocity = staticmethod(max_velocity)
+    size_range = staticmethod(size_range)
+    stability_inputs = staticmethod(stability_inputs)
+    prepare = staticmethod(prepare)
+
+    def post(self, run_dir, params, output):
+        rows = output.wall_rows()
+        out = {"controls": _controls(params, output.frame_steps)}
+        if rows is not None and rows.size:
+            out["walls"] = _walls(params, rows)
+        return out

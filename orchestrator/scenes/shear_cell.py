@@ -37,6 +37,7 @@ from pydantic import Field, field_validator, model_validator
 from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
 from ..units import Angle, AngularVelocity, Length, Pressure
+from . import base
 
 CONTROLS: tuple[str, ...] = ("angle", "stage")
 STAGES = {"initial": 0, "relaxed": 1, "compressed": 2, "shear": 3}
@@ -491,20 +492,6 @@ def _write_check(run_dir, params, walls, step):
     return chk
 
 
-def liggghts_extras(run_dir, params) -> dict:
-    """Wall series from ``walls.*.txt`` (fix ave/time, averages over each sampling interval) and
-    the per-frame ``angle``/``stage`` controls."""
-    run_dir = Path(run_dir)
-    rows = []
-    for f in sorted(run_dir.glob("walls.*.txt")):
-        a = np.loadtxt(f, comments="#", ndmin=2)
-        if a.size:
-            rows.append(a)
-    steps = [int(st) for st in params["scene"]["frame_steps"]]   # the deck writes exactly these
-    out = {"controls": _frame_controls(params, steps)}
-    return _with_walls(out, rows, run_dir, params)
-
-
 def _with_walls(out: dict, rows: list, run_dir, params) -> dict:
     """Add the wall series from sampled rows (columns: step, z_lower, fx fy fz (lower),
     tz_lower, tz_upper, tz_cylinder) and write the compression check."""
@@ -520,13 +507,35 @@ def _with_walls(out: dict, rows: list, run_dir, params) -> dict:
     return out
 
 
-def yade_extras(run_dir, params) -> dict:
-    """Wall series from ``walls.yade.*.npy`` (written by the script's sampler)."""
-    run_dir = Path(run_dir)
-    rows = [np.load(f) for f in sorted(run_dir.glob("walls.yade.*.npy"))]
-    steps = []
-    for c in sorted((run_dir / "dump").glob("chunk.*.npz")):
-        steps += [int(i) for i in np.load(c)["iter"]]
-    steps = sorted(set(steps))
-    out = {"controls": _frame_controls(params, steps)}
-    return _with_walls(out, rows, run_dir, params)
+class ShearCellScene(base.Scene):
+    """The vaned micro shear cell (module docstring). Controls per frame: the rotating piston's
+    ``angle`` [rad] and the protocol ``stage``; wall series ``lower_piston`` and ``rotating``."""
+    kind = "shear_cell"
+    section = Scene
+    honoured = frozenset({"contact.adhesion", "contact.rolling", "contact.torsion", "contact.damping: seed000",
+                          "gravity", "output.contacts", "output.stress", "initial_packing"})
+    controls = {"angle": "rad", "stage": "1"}
+    #: the decks' wall sampler (LIGGGHTS fix ave/time, YADE's sampler): one row per sample
+    wall_columns = ("step", "z_lower", "fx_lower", "fy_lower", "fz_lower", "tz_lower", "tz_upper", "tz_cylinder")
+    observables = ("torque", "angle")
+
+    required_features = staticmethod(required_features)
+    derive = staticmethod(derive)
+    max_velocity = staticmethod(max_velocity)
+    size_range = staticmethod(size_range)
+
+    def stability_inputs(self, case, params):
+        sc = params["scene"]
+        return {"wall_speeds": {"servo": sc["servo"]["v_max"], "rotating_rim": sc["omega"] * sc["geometry"]["R_cyl"]},
+                "confining_stress": case.scene.normal_stress, "skin": sc["skin"],
+                "height": sc["box_hi"][2] - sc["box_lo"][2],
+                "wall_force_target": sc["servo"]["target_force"]}
+
+    prepare = staticmethod(prepare)
+
+    def post(self, run_dir, params, output):
+        """Wall series from the sampler's rows and the per-frame ``angle``/``stage`` controls of
+        the frames the engine wrote; writes the compression check."""
+        rows = output.wall_rows()
+        out = {"controls": _frame_controls(params, [int(st) for st in output.frame_steps])}
+        return _with_walls(out, [] if rows is None else [rows], run_dir, params)
