@@ -9,7 +9,7 @@ from __future__ import annotations
 import difflib
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union, get_args
+from typing import Annotated, Any, ClassVar, Literal, Union, get_args
 
 import yaml
 from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, field_validator,
@@ -171,6 +171,15 @@ class Output(Strict):
     torque: bool = False
     stress: bool = False
     contacts: bool = False
+
+    #: per-particle frames.h5 fields, in the order frames.h5 lists them
+    FIELDS: ClassVar[tuple[str, ...]] = ("position", "velocity", "angular_velocity", "orientation", "force",
+                                         "torque", "stress")
+
+    def fields(self, written: tuple[str, ...] = FIELDS) -> list[str]:
+        """The per-particle fields the case asks for (position always), in frames.h5 order, among
+        those an engine ``written`` can write (the one output-field selection of every adapter)."""
+        return [f for f in self.FIELDS if f in written and (f == "position" or getattr(self, f))]
 
 
 class InitialPacking(Strict):

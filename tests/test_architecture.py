@@ -117,3 +117,15 @@ def test_import_layers_hold():
     r = subprocess.run([exe, "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
     assert "0 broken" in r.stdout
+
+
+def test_one_output_field_selection():
+    """Output.fields is the one selection both adapters use: frames.h5 order, position always, an
+    engine's unwritable fields left out (LIGGGHTS' spheres carry no orientation)."""
+    from engines.liggghts.adapter import FRAME_FIELDS, _fields
+    case = load_case(CASES / "triaxial_smoke.yaml", overrides={"output": {"velocity": True, "torque": True,
+                                                                          "orientation": True, "stress": False}})
+    want = [f for f in ("position", "velocity", "angular_velocity", "orientation", "force", "torque", "stress")
+            if f == "position" or getattr(case.output, f)]
+    assert case.output.fields() == want
+    assert _fields(case) == [f for f in want if f != "orientation"] and "orientation" not in FRAME_FIELDS

@@ -313,11 +313,12 @@ def _inserted(params) -> bool:
     return bool(sc.get("clumps") and sc["clumps"].get("liggghts"))
 
 
+#: frames.h5 fields LIGGGHTS' dump custom gives (spheres: no orientation)
+FRAME_FIELDS = ("position", "velocity", "angular_velocity", "force", "torque", "stress")
+
+
 def _fields(case) -> list[str]:
-    o = case.output
-    return ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
-                                           ("force", o.force), ("torque", o.torque)) if on] + \
-        (["stress"] if o.stress else [])
+    return case.output.fields(FRAME_FIELDS)
 
 
 def _deck_beside(log: Path):

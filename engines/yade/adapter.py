@@ -76,9 +76,7 @@ class Yade(Engine):
         (run_dir / "dump").mkdir(exist_ok=True)
         sc = params["scene"]
         o = case.output
-        fields = ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
-                                                 ("orientation", o.orientation), ("force", o.force),
-                                                 ("torque", o.torque), ("stress", o.stress)) if on]
+        fields = o.fields()
         n = max(1, len(sc.get("ids", [])) or 1)
         ctx = {
             "case": case, "p": params, "resume": resume,

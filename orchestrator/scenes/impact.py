@@ -18,7 +18,6 @@ from ..derive import YADE_PLANE_SPHERE_FACTOR, hertz_contact_time
 from ..units import Angle, Length, Velocity
 from . import base
 
-CONTROLS: tuple[str, ...] = ()
 
 
 class Scene(Strict):

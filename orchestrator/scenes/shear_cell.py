@@ -33,13 +33,17 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
+from scipy.integrate import solve_ivp
 
+from ..atomic import write_json
 from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
+from ..geometry import cylinder_shell, vaned_piston, write_stl
+from ..particles_io import ensure_particle_table
+from ..psd import lognormal_diameters, mean_sphere_volume, pack_cylinder
 from ..units import Angle, AngularVelocity, Length, Pressure
 from . import base
 
-CONTROLS: tuple[str, ...] = ("angle", "stage")
 STAGES = {"initial": 0, "relaxed": 1, "compressed": 2, "shear": 3}
 DEG = math.pi / 180
 
@@ -141,7 +145,6 @@ def size_range(case) -> tuple[float, float]:
 
 
 def _mean_volume(scene) -> float:
-    from ..psd import mean_sphere_volume
     p = scene.psd
     return mean_sphere_volume(p.median, p.d_min, p.d_max, p.sigma_ln)
 
@@ -227,7 +230,6 @@ def max_velocity(case) -> float:
 def seed000_restitution(E_eff: float, m_eff: float, r_eff: float, v: float) -> float:
     """Restitution [-] that seed 000's damped Hertz law F = 4/3 E* √r ξ^1.5 + γ_n √ξ ξ̇ with
     γ_n = √(4/3 E* m*) delivers at normal impact speed ``v`` [m/s] (force clipped at 0)."""
-    from scipy.integrate import solve_ivp
     k = 4 / 3 * E_eff * math.sqrt(r_eff)
     g = math.sqrt(4 / 3 * E_eff * m_eff)
 
@@ -399,7 +401,6 @@ def derive(case, common: dict) -> dict:
 def build_meshes(case, params) -> dict:
     """The three solids (Mesh objects): ``lower`` piston (vanes up, plate face at z = 0), ``upper``
     piston (vanes down), ``cylinder`` (closed can around both)."""
-    from ..geometry import cylinder_shell, vaned_piston
     s = case.scene
     g = params["scene"]["geometry"]
     seg = g["segments"]
@@ -415,7 +416,6 @@ def build_meshes(case, params) -> dict:
 
 def sample_particles(case, params) -> dict:
     """Diameters and loose positions, sampled once from the case's seed (same for all engines)."""
-    from ..psd import lognormal_diameters, pack_cylinder
     s = case.scene
     g = params["scene"]["geometry"]
     rng = np.random.default_rng(case.seed)
@@ -426,8 +426,6 @@ def sample_particles(case, params) -> dict:
 
 def prepare(case, params, run_dir) -> dict:
     """Write particles.txt (and LIGGGHTS' particles.data) and the three STL meshes."""
-    from ..geometry import write_stl
-    from ..particles_io import ensure_particle_table
     run_dir = Path(run_dir)
     files = {}
     meshes = build_meshes(case, params)
@@ -487,7 +485,6 @@ def _wall_result(params, step, z_lower, f_lower, t_rot, t_lower):
 
 def _write_check(run_dir, params, walls, step):
     chk = _compression_check(params, walls["lower_piston"]["time"], step, walls["lower_piston"]["force"][:, 2])
-    from ..atomic import write_json
     write_json(Path(run_dir) / "shear_cell_checks.json", {"compression": chk})
     return chk
 

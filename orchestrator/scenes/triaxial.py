@@ -42,15 +42,23 @@ stage-2 reference). The volume V is measured two independent ways:
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import os
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
+from scipy.optimize import brentq
+from scipy.spatial import ConvexHull, cKDTree
 
+from ..atomic import write_json, write_text
 from ..case import Strict, positive
+from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
+from ..derive import DerivationError
+from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
 
@@ -135,7 +143,6 @@ def _truncated_mean(mu, s, lo, hi, m=4000):
 
 
 def _lognormal_mu(lo, hi, mean, s):
-    from scipy.optimize import brentq
     return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
 
 
@@ -231,7 +238,6 @@ class Particles(Strict):
         if self.shape == "clumps":
             if not self.library:
                 raise ValueError("particles.shape: clumps needs particles.library (a .yaml or .npz shape library)")
-            from ..clumps import load_library
             load_library(self.library)          # raises LibraryError (a ValueError) naming file and shape
         elif self.library is not None:
             raise ValueError("particles.library is only used with particles.shape: clumps")
@@ -282,7 +288,6 @@ def size_range(case) -> tuple[float, float]:
     library shapes scaled to the PSD's smallest and largest diameters; the time step follows)."""
     lo, hi = case.scene.psd.bounds()
     if case.scene.particles.shape == "clumps":
-        from ..clumps import equivalent_scale
         shapes = _clump_library(case.scene.particles.library)
         r_lo = min(float(sh[:, 3].min()) * equivalent_scale(sh, lo, v) for sh, (v, _) in shapes)
         r_hi = max(float(sh[:, 3].max()) * equivalent_scale(sh, hi, v) for sh, (v, _) in shapes)
@@ -295,7 +300,6 @@ _LIB_CACHE: dict = {}
 
 def _clump_library(path) -> list:
     """[(shape (m, 4), (union volume, centre of mass))] of a clump library, cached by path."""
-    from ..clumps import load_library, mass_properties
     key = str(Path(path).resolve())
     if key not in _LIB_CACHE:
         out = []
@@ -310,7 +314,6 @@ def _clump_draw(case, d: np.ndarray):
     """Per grain: library shape index, orientation quaternion, scale to the volume of diameter d,
     bounding-sphere radius [m]; and f = (Σ r_b³ / Σ (d/2)³)^(1/3), the factor by which the sample
     grows so that the bounding spheres fill it at the case's packing fraction."""
-    from ..clumps import bounding_radius, equivalent_scale, random_quaternions
     lib = _clump_library(case.scene.particles.library)
     rng = np.random.default_rng(case.seed + 3)
     k = rng.integers(len(lib), size=len(d))
@@ -326,7 +329,6 @@ def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, n
     by :func:`pack_cylinder` in the cylinder of radius R, height H [m] (:func:`derive` has enlarged
     it by :func:`_clump_draw`'s f). Returns (member spheres (M, 4) [m], clump index of each member (M,),
     clump mass centres (n, 3), packing geometry of the members)."""
-    from ..clumps import place
     lib = _clump_library(case.scene.particles.library)
     k, q, scale, rb, f = _clump_draw(case, d)
     centres, _ = cached_packing(rb, R, H, case.seed + 2)
@@ -377,7 +379,6 @@ def liggghts_clumps(case, d: np.ndarray) -> dict:
     The weights of ``particledistribution/discrete/numberbased`` are count/n: with
     ``random_distribute exact`` LIGGGHTS inserts exactly these counts (checked on the installed
     binary: 300 bodies of two templates at 40/60 % gave 120/180)."""
-    from ..clumps import equivalent_scale, mass_properties
     P = case.scene.particles
     lib = _clump_library(P.library)
     k = _clump_draw(case, d)[0]
@@ -555,7 +556,6 @@ def derive(case, common: dict) -> dict:
     gain_critical = p * d50 ** 2 / (v_iso * servo_every * dt * k_hertz)
     gain = s.isotropic.gain if s.isotropic.gain is not None else 0.8 * gain_critical
     if gain >= gain_critical:
-        from ..derive import DerivationError
         raise DerivationError(f"scene.isotropic.gain = {gain:.3g} is at or above the servo's stability limit "
                               f"g_c = {gain_critical:.3g} (p d50^2 / (v_max n dt k), docs/triaxial.md): the platen "
                               f"would overshoot at every update; use a gain below {gain_critical:.3g} or leave it "
@@ -567,7 +567,6 @@ def derive(case, common: dict) -> dict:
         r_min = common["r_min"]
         tau = 2 * rho * r_min ** 2 / (9 * nu)          # m/b of the smallest grain
         if dt > tau:
-            from ..derive import DerivationError
             raise DerivationError(f"scene.isotropic.drag: the drag time m/b = {tau:.3g} s of the smallest grain is "
                                   f"below dt = {dt:.3g} s (explicit drag unstable); raise "
                                   "scene.isotropic.inertial_number or set drag: false")
@@ -619,8 +618,6 @@ def derive(case, common: dict) -> dict:
 def prepare(case, params: dict, run_dir: Path) -> dict:
     """Pack the grains (cached in run_dir), write particles.txt and the platen meshes; complete
     params['scene'] with the packed geometry."""
-    from ..atomic import write_json
-    from ..particles_io import write_particle_table
     sc = params["scene"]
     run_dir = Path(run_dir)
     geo_path = run_dir / "packing.json"
@@ -632,7 +629,6 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
         m, owner, _, geo = build_clumps(case, np.asarray(sc["diameters"]), sc["diameter"] / 2, sc["height"])
         ids = np.arange(1, len(m) + 1)
         write_particle_table(run_dir / "particles.txt", ids, m[:, 3], case.material.density, m[:, :3])
-        from ..atomic import write_text
         write_text(run_dir / "clumps.txt", "# member_id clump\n" +
                    "".join(f"{i} {c}\n" for i, c in zip(ids, owner)))
         write_json(geo_path, geo)
@@ -659,7 +655,6 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
 
 def _write_square_stl(path: Path, half: float, z: float, up: bool):
     """A square plate of half-width ``half`` at height z, two triangles, normal +z if ``up``."""
-    from ..atomic import write_text
     a, b, c, dd = (-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)
     tris = [(a, b, c), (a, c, dd)] if up else [(a, c, b), (a, dd, c)]
     nz = 1.0 if up else -1.0
@@ -678,8 +673,6 @@ def _write_square_stl(path: Path, half: float, z: float, up: bool):
 def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.ndarray, dict]:
     """:func:`pack_cylinder`, cached by its inputs in ``$ORCHESTRATOR_CACHE/packings`` (default
     ``~/.cache/orchestrator``), so that both engines' runs of a case pack once."""
-    import hashlib
-    import os
     h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 1)).encode())
     root = Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / "packings"
     f = root / f"{h.hexdigest()[:24]}.npz"
@@ -701,7 +694,6 @@ def pack_cylinder(r: np.ndarray, R: float, H: float, rng: np.random.Generator, t
     of overlapping spheres (each moved in inverse proportion to its volume) and projection into
     the cylinder, until the largest overlap is below ``tol`` × r_min; the remaining overlaps are
     removed by a uniform expansion about the centre. Returns (positions, geometry)."""
-    from scipy.spatial import cKDTree
     n = len(r)
     u = rng.random(n)
     th = rng.random(n) * 2 * np.pi
@@ -781,7 +773,6 @@ def hull_volume(pos: np.ndarray, r: np.ndarray, z_bottom: float | None = None, z
     """Volume [m³] of the convex hull of the grains' surfaces, clipped to the platens
     z_bottom ≤ z ≤ z_top when given. Surfaces are sampled with 96 points per sphere for the
     spheres whose centre lies within 2 r_max of the centres' hull (the others cannot touch it)."""
-    from scipy.spatial import ConvexHull
     ok = ~np.isnan(pos).any(axis=1)
     pos, r = pos[ok], r[ok]
     h0 = ConvexHull(pos)
@@ -854,8 +845,6 @@ def peak_stress_ratio(sigma1: np.ndarray, sigma3: np.ndarray, w: int) -> dict:
 
 def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positions) -> dict:
     """Controls per frame, wall/time series and the scene summary (``scene_summary.json``)."""
-    from ..atomic import write_json
-    from ..particles_io import read_particle_table
     sc = params["scene"]
     p = sc["pressure"]
     s = read_series(run_dir)
