@@ -58,6 +58,7 @@ from ..atomic import write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
 from ..derive import DerivationError
+from ..numerics import running_mean
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
@@ -824,12 +825,6 @@ def smoothing_rows(n: int) -> int:
     """Rows of the running mean used for the shear-stage summary figures: 10, or a tenth of the
     n loading rows when there are fewer than 100 (at least 1)."""
     return max(1, min(10, n // 10))
-
-
-def running_mean(x: np.ndarray, w: int) -> np.ndarray:
-    """Means over every window of w consecutive rows (len(x) - w + 1 values)."""
-    x = np.asarray(x, dtype=float)
-    return np.convolve(x, np.ones(w) / w, mode="valid") if len(x) >= w else np.array([np.mean(x)])
 
 
 def peak_stress_ratio(sigma1: np.ndarray, sigma3: np.ndarray, w: int) -> dict:
