@@ -2,11 +2,12 @@
 
 Render: ``templates/liggghts/<scene>.in.j2`` with the derived parameters; particles go in through
 ``read_data`` from the orchestrator's particle table, except where the deck inserts them itself
-(clumps: substitute ``inserted_clumps``; the scene's ``liggghts_before_parse`` hook then writes the
-particle table from the frames). Run: ``liggghts -in deck.in`` (under
-``mpirun -np N`` for N > 1 ranks), progress from thermo lines. Parse: ``dump custom`` text files
-(one per output step, ``dump/frame.<step>.txt``) into frames.h5. Resume: ``restart`` files
-``restart/state.<step>.restart`` and ``run N upto``.
+(clumps: substitute ``inserted_clumps``; :mod:`engines.liggghts.triaxial` then writes the
+particle table from the first frame). Run: ``liggghts -in deck.in`` (under ``mpirun -np N`` for
+N > 1 ranks), progress from thermo lines. Parse: the binary ``dump custom`` segments
+(:mod:`engines.liggghts.segments`, read by :mod:`engines.lammps_dump`) into frames.h5, with the
+scene's controls and wall series from its ``post`` (the scene sees the frames through
+:class:`DumpOutput`). Resume: ``restart`` files ``restart/state.<step>.restart`` and ``run N upto``.
 """
 from __future__ import annotations
 
