@@ -9,15 +9,15 @@ from __future__ import annotations
 import difflib
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal, Union, get_args
 
 import yaml
-from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_validator,
+from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, field_validator,
                       model_validator)
 
+from .derive import DerivationError, derive
+from .registry import engine_names, get_scene, scene_kinds
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
-
-ENGINES = ("liggghts", "yade")
 
 
 class CaseError(ValueError):
@@ -172,6 +172,15 @@ class Output(Strict):
     stress: bool = False
     contacts: bool = False
 
+    #: per-particle frames.h5 fields, in the order frames.h5 lists them
+    FIELDS: ClassVar[tuple[str, ...]] = ("position", "velocity", "angular_velocity", "orientation", "force",
+                                         "torque", "stress")
+
+    def fields(self, written: tuple[str, ...] = FIELDS) -> list[str]:
+        """The per-particle fields the case asks for (position always), in frames.h5 order, among
+        those an engine ``written`` can write (the one output-field selection of every adapter)."""
+        return [f for f in self.FIELDS if f in written and (f == "position" or getattr(self, f))]
+
 
 class InitialPacking(Strict):
     """A frame of a frames.h5 (a CT scan or a run) as the initial packing (orchestrator.initial_packing)."""
@@ -217,11 +226,10 @@ class CTSeries(Strict):
 # The case
 # ---------------------------------------------------------------------------------------------
 def _scene_union():
-    from .scenes import scene_models
-    models = scene_models()
+    """The union of every registered scene's case section, told apart by ``kind``."""
+    models = [get_scene(k).section for k in scene_kinds()]
     if len(models) == 1:
         return models[0]
-    from typing import Union
     return Annotated[Union[tuple(models)], Field(discriminator="kind")]
 
 
@@ -229,7 +237,7 @@ class Case(Strict):
     """A simulation case. Everything in SI after loading."""
     name: str
     description: str = ""
-    engines: list[Literal["liggghts", "yade"]] = Field(default_factory=lambda: list(ENGINES))
+    engines: list[str] = Field(default_factory=lambda: list(engine_names()))
     seed: int = 12345
     material: Material
     wall: Material | RigidWall = Field(default_factory=RigidWall)
@@ -244,6 +252,15 @@ class Case(Strict):
     ct: CTSeries | None = None
     initial_packing: InitialPacking | None = None
 
+    @field_validator("engines")
+    @classmethod
+    def _engines(cls, v):
+        known = engine_names()
+        for name in v:
+            if name not in known:
+                raise ValueError(f"unknown engine {name!r}; installed engines: {', '.join(known)}")
+        return v
+
     @field_validator("analysis")
     @classmethod
     def _analysis(cls, v):
@@ -255,8 +272,14 @@ class Case(Strict):
     @field_validator("scene", mode="before")
     @classmethod
     def _scene(cls, v):
-        from pydantic import TypeAdapter
         return TypeAdapter(_scene_union()).validate_python(v)
+
+    def wall_moduli(self) -> tuple[float, float]:
+        """(E_wall [Pa], ν_wall) from the ``wall`` section (a rigid wall: stiffness_ratio × E)."""
+        w = self.wall
+        if isinstance(w, RigidWall):
+            return self.material.youngs_modulus * w.stiffness_ratio, w.poisson_ratio
+        return w.youngs_modulus, w.poisson_ratio
 
     @property
     def source(self) -> str | None:
@@ -336,8 +359,7 @@ def _allowed_fields(loc: tuple) -> list[str]:
         elif part == "scene":
             model = None
         else:
-            from .scenes import scene_models
-            for m in scene_models():
+            for m in (get_scene(k).section for k in scene_kinds()):
                 if m.__name__ == part or getattr(m, "_kind", None) == part:
                     model = m
                     break
@@ -347,10 +369,9 @@ def _allowed_fields(loc: tuple) -> list[str]:
 
 
 def _first_model(ann):
-    import typing
     if isinstance(ann, type) and issubclass(ann, BaseModel):
         return ann
-    for a in typing.get_args(ann):
+    for a in get_args(ann):
         m = _first_model(a)
         if m is not None:
             return m
@@ -364,7 +385,6 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         # strip discriminator tags pydantic inserts for unions (e.g. 'impact')
         clean = tuple(p for p in loc if not (isinstance(p, str) and p.endswith("]")))
         if len(clean) > 1 and clean[0] == "scene":
-            from .scenes import scene_kinds
             if clean[1] in scene_kinds():        # the discriminated union's tag
                 clean = clean[:1] + clean[2:]
         path = ".".join(str(p) for p in clean) or "(top level)"
@@ -378,7 +398,6 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         elif typ == "missing":
             problems.append(f"{path}: required field is missing; add it")
         elif typ == "union_tag_invalid" or typ == "union_tag_not_found":
-            from .scenes import scene_kinds
             problems.append(f"{path}: {msg}; scene.kind must be one of {', '.join(scene_kinds())}")
         else:
             got = e.get("input")
@@ -414,8 +433,11 @@ def case_from_dict(data: dict, source="<dict>", check_timestep: bool = True) -> 
                     exc.title, [e]) if False else _single(exc, e))
         raise CaseError(source, problems) from None
     object.__setattr__(case, "_source", str(source))
+    # a term the scene does not realise in any engine's deck is refused, never dropped silently
+    refused = get_scene(case.scene.kind).refused_terms(case)
+    if refused:
+        raise CaseError(source, refused)
     if check_timestep:
-        from .derive import derive, DerivationError
         try:
             derive(case)
         except DerivationError as exc:

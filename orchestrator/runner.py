@@ -7,6 +7,7 @@ file is written under a temporary name and renamed.
 """
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import shutil
@@ -16,21 +17,17 @@ from pathlib import Path
 
 import yaml
 
-from engines import get_engine
 from engines.base import EngineError
 from engines.render import templates_hash
 
 from .atomic import write_json, write_text
 from .case import Case
 from .derive import derive
-from .particles_io import write_particle_table
-
-#: measured single-core throughput [particle-steps/s] used for run-time estimates when no
-#: benchmark result is stored (ENGINES.md: 2000 dense Hertz spheres on this machine).
-DEFAULT_THROUGHPUT = {"liggghts": 6e6, "yade": 1.5e6}
-#: process start-up and set-up [s] measured on this machine (tiny verification cases: total engine
-#: time minus the engines' own loop time)
-DEFAULT_STARTUP = {"liggghts": 0.5, "yade": 2.0}
+from .frames import Frames
+from .initial_packing import apply_initial_packing, packing_digest, verify_written
+from .registry import get_engine, get_scene
+from .resources import data_file
+from .stability.monitors import read_verdict
 
 
 @dataclass
@@ -42,7 +39,6 @@ class RunOutcome:
 
     @property
     def frames(self):
-        from .frames import Frames
         return Frames(self.run_dir / "frames.h5")
 
 
@@ -61,7 +57,6 @@ def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | N
     h.update(engine_version.encode())
     h.update(templates_hash(engine_name, case.scene.kind).encode())
     if getattr(case, "initial_packing", None) is not None:
-        from .initial_packing import packing_digest
         h.update(packing_digest(case.initial_packing).encode())
     return h.hexdigest()[:12]
 
@@ -80,36 +75,29 @@ def read_summary(run_dir) -> dict | None:
 
 def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     """Engine wall time [s] estimated from the derived step count, particle count and the
-    engine's throughput (benchmarks/throughput.json when measured, else ENGINES.md figures)."""
-    tp = dict(DEFAULT_THROUGHPUT)
-    stored = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.json"
-    if stored.exists():
-        tp.update(json.loads(stored.read_text()))
+    engine's throughput (benchmarks/throughput.json, shipped as package data, when measured; else
+    the adapter's own figures, :attr:`engines.base.Engine.throughput`)."""
+    eng = get_engine(engine_name)
+    tp = eng.throughput
+    stored = data_file("benchmarks/throughput.json")
+    if stored.is_file():
+        tp = json.loads(stored.read_text()).get(engine_name, tp)
     sc = params["scene"]
     n = sc.get("n", len(sc.get("ids", [])))
     steps = sc.get("total_steps", sc["steps"])
-    ranks = case.engine_options.mpi_ranks if engine_name == "liggghts" else case.engine_options.threads
-    return DEFAULT_STARTUP[engine_name] + steps * max(n, 1) / (tp[engine_name] * ranks)
+    return eng.startup + steps * max(n, 1) / (tp * eng.workers(case))
 
 
 def prepare(case: Case, engine_name: str, run_dir: Path, params: dict | None = None) -> tuple[dict, list]:
     """Derive parameters (unless given), check capabilities, write case/params/particles.
     Returns (params, subs)."""
-    from .scenes import scene_module
     eng = get_engine(engine_name)
     params = derive(case) if params is None else params
     subs = eng.check(params["features"], case.contact.substitutes)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
-    mod = scene_module(case.scene.kind)
-    from .initial_packing import apply_initial_packing, verify_written
     packing = apply_initial_packing(case, params, run_dir)      # None without case.initial_packing
-    if hasattr(mod, "prepare"):
-        params["files"] = mod.prepare(case, params, run_dir) or {}
-    elif not (run_dir / "particles.txt").exists():
-        sc = params["scene"]
-        write_particle_table(run_dir / "particles.txt", sc["ids"], sc["radius"], case.material.density,
-                             sc["position"], sc.get("velocity"))
+    params["files"] = get_scene(case.scene.kind).prepare(case, params, run_dir) or {}
     if packing is not None:
         verify_written(case, run_dir, packing)
         params["initial_packing"] = packing
@@ -153,7 +141,6 @@ class _RunLock:
         self.path = run_dir / ".lock"
 
     def __enter__(self):
-        import fcntl
         self.fh = open(self.path, "w")
         try:
             fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -163,7 +150,6 @@ class _RunLock:
         return self
 
     def __exit__(self, *exc):
-        import fcntl
         fcntl.flock(self.fh, fcntl.LOCK_UN)
         self.fh.close()
 
@@ -198,7 +184,6 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     write_json(run_dir / "summary.json", summary)
     progress = case.engine_options.progress if progress is None else progress
     t1 = time.perf_counter()
-    from .stability.monitors import read_verdict
     try:
         res, resume = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress)
         summary["resumed_from"] = resume
@@ -294,12 +279,10 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
 
 
 def _scene_resume(case, engine_name: str, run_dir: Path, resume: dict | None) -> dict | None:
-    """Let the scene check and complete the engine's resume point (``resume_point(engine, run_dir,
-    resume)`` in the scene module: e.g. the stage state a deck needs to re-enter the right stage);
-    it may return None (start afresh) and tidies the run directory for the chosen point."""
-    from .scenes import scene_module
-    hook = getattr(scene_module(case.scene.kind), "resume_point", None)
-    return hook(engine_name, Path(run_dir), resume) if hook else resume
+    """Let the engine check and complete its resume point for the case's scene
+    (:meth:`engines.base.Engine.complete_resume`: e.g. the stage state a deck needs to re-enter
+    the right stage); it may return None (start afresh) and tidies the run directory."""
+    return get_engine(engine_name).complete_resume(case, Path(run_dir), resume)
 
 
 def _restart_step(cand: str, resume: dict) -> int:
@@ -310,9 +293,8 @@ def _restart_step(cand: str, resume: dict) -> int:
 
 def run_case_analyses(case: Case, run_dir: Path) -> dict:
     """Run the case's ``analysis:`` list on the run's frames (orchestrator.analysis)."""
-    from .frames import Frames
     try:
-        from .analysis import run_analyses
+        from .analysis import run_analyses       # on demand: the analysis stack (scikit-image, pyvista) is heavy
     except ImportError as exc:  # analysis package not available
         return {"error": f"analysis unavailable: {exc}"}
     return run_analyses(Frames(run_dir / "frames.h5"), case.analysis, run_dir / "analysis")
