@@ -170,6 +170,7 @@ class Liggghts(Engine):
             for seg in dump_segments(run_dir):
                 if truncate_binary_dump(seg, n, resume["step"]) == 0:
                     seg.unlink()
+        cut_wall_series(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
@@ -445,3 +446,19 @@ def write_data_file(path: Path, table_path: Path, lo, hi):
         vx, vy, vz = t["velocity"][k]
         out.append(f"{t['id'][k]} {f(vx)} {f(vy)} {f(vz)} 0.0 0.0 0.0")
     write_text(path, "\n".join(out) + "\n")
+
+
+def cut_wall_series(run_dir: Path, step: int) -> None:
+    """Cut the wall series a deck writes with ``fix ave/time ... file walls.<start step>.txt`` back to
+    the rows of steps <= ``step`` (a resumed run writes its own file from there; rows after the
+    restart step would appear twice); a file begun after ``step`` is removed."""
+    for f in Path(run_dir).glob("walls.*.txt"):
+        start = f.name.split(".")[1]
+        if start.isdigit() and int(start) > step:
+            f.unlink()
+            continue
+        lines = f.read_text().splitlines(keepends=True)
+        keep = [ln for ln in lines if ln.startswith("#") or not ln.split() or int(float(ln.split()[0])) <= step]
+        if len(keep) != len(lines):
+            from orchestrator.atomic import write_text
+            write_text(f, "".join(keep))
