@@ -163,45 +163,51 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     version = eng.version()
     params = derive(case)
     run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, params)}"
-    old = read_summary(run_dir)
-    damaged = []
-    if old and old.get("status") == "complete" and not force and not dry_run:
-        from .integrity import verify_run
-        damaged = verify_run(run_dir, old)
-        if any(not name.startswith("analysis") for name, _ in damaged):
-            _say(f"{run_dir}: the complete run is damaged, so it is redone: "
-                 + "; ".join(msg for _, msg in damaged))
-            old = dict(old, status="damaged", damaged=[m for _, m in damaged])
-            _clear_results(run_dir)
-        elif damaged:
-            _say(f"{run_dir}: analysis outputs damaged, so the analyses are redone: "
-                 + "; ".join(msg for _, msg in damaged))
-            old["analysis_specs"] = None
-    if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
-        if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
-            with _RunLock(run_dir):               # the run is reused; its analyses are (re)done
-                t0 = time.perf_counter()
+    if dry_run:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        with _RunLock(run_dir):
+            return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
+    if force and run_dir.exists():
+        if _lock_held(run_dir):
+            raise EngineError(f"{run_dir} is being run by another process; wait for it or stop it before --force")
+        shutil.rmtree(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    # under the lock (waiting for a process that runs the same case: its result is then reused)
+    with _RunLock(run_dir, wait=True):
+        old = read_summary(run_dir)
+        if old and old.get("status") == "complete" and not force:
+            from .integrity import verify_run
+            damaged = verify_run(run_dir, old)
+            if any(not name.startswith("analysis") for name, _ in damaged):
+                _say(f"{run_dir}: the complete run is damaged, so it is redone: "
+                     + "; ".join(msg for _, msg in damaged))
+                old = dict(old, status="damaged", damaged=[m for _, m in damaged])
+                _clear_results(run_dir)
+            elif damaged:
+                _say(f"{run_dir}: analysis outputs damaged, so the analyses are redone: "
+                     + "; ".join(msg for _, msg in damaged))
+                old["analysis_specs"] = None
+        if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force:
+            if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
+                t0 = time.perf_counter()              # the run is reused; its analyses are (re)done
                 old["analysis"] = run_case_analyses(case, run_dir)
                 old["analysis_specs"] = case.analysis
                 old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
                 from .integrity import run_record
                 old["integrity"] = run_record(run_dir, old["analysis"])
                 write_json(run_dir / "summary.json", old)
-        return RunOutcome(run_dir, "complete", old, reused=True)
-    if old and old.get("status") == "unstable" and not force and not dry_run:
-        return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
-    if force and run_dir.exists():
-        shutil.rmtree(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    with _RunLock(run_dir):
+            return RunOutcome(run_dir, "complete", old, reused=True)
+        if old and old.get("status") == "unstable" and not force:
+            return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
         return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
 
 
 class _RunLock:
     """An exclusive lock on a run directory (flock), so two processes never drive one run."""
 
-    def __init__(self, run_dir: Path):
+    def __init__(self, run_dir: Path, wait: bool = False):
         self.path = run_dir / ".lock"
+        self.wait = wait
 
     def __enter__(self):
         import fcntl
@@ -209,8 +215,11 @@ class _RunLock:
         try:
             fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            self.fh.close()
-            raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+            if not self.wait:
+                self.fh.close()
+                raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+            _say(f"{self.path.parent} is being run by another process; waiting for it (its result is then reused)")
+            fcntl.flock(self.fh, fcntl.LOCK_EX)
         return self
 
     def __exit__(self, *exc):
@@ -304,9 +313,16 @@ def _say(msg: str) -> None:
 
 
 def _clear_results(run_dir: Path) -> None:
-    """Remove a damaged complete run so that it is redone from the start (its resume points were
-    dropped when it completed; what is left of its engine output must not mix into the new run)."""
-    shutil.rmtree(run_dir, ignore_errors=True)
+    """Empty a damaged complete run's directory (all but its lock, which the caller holds) so that
+    it is redone from the start: its resume points were dropped when it completed, and what is left
+    of its engine output must not mix into the new run."""
+    for f in run_dir.iterdir():
+        if f.name == ".lock":
+            continue
+        if f.is_dir() and not f.is_symlink():
+            shutil.rmtree(f, ignore_errors=True)
+        else:
+            f.unlink(missing_ok=True)
 
 
 def drop_resume_points(run_dir: Path) -> int:
