@@ -296,3 +296,19 @@ def test_truncated_frames_file_of_a_complete_run_is_redone(tmp_path, engines_ins
     assert np.array_equal(np.array(__import__("orchestrator").load(run).position), ref)
     third = cli("run", IMPACT, "--engine", "liggghts", "--runs", runs, "--quiet")
     assert "reused" in third.stdout and "damaged" not in third.stderr
+
+
+@pytest.mark.engine
+def test_same_case_started_three_times_at_once(tmp_path, engines_installed):
+    """Runs of one case started together share its run directory: one drives it, the others wait
+    for its lock and reuse the result (it said 'is being run by another process', exit 1). One
+    engine at a time, so it fits the test machine (benchmarks/load_check.py: 8 runs, 5 cases)."""
+    runs = tmp_path / "runs"
+    cmd = [sys.executable, "-m", "orchestrator", "run", str(IMPACT), "--engine", "liggghts", "--runs", str(runs),
+           "--quiet"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    outs = [p.communicate(timeout=600) + (p.returncode,) for p in procs]
+    assert all(code == 0 for _, _, code in outs), [e[-2000:] for _, e, _ in outs]
+    assert sum("reused" in o for o, _, _ in outs) == 2, [o for o, _, _ in outs]
+    (run,) = runs.glob("*/liggghts-*")
+    assert json.loads((run / "summary.json").read_text())["status"] == "complete"
