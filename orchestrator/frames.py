@@ -474,7 +474,11 @@ class _open_h5:
 
     def __exit__(self, typ, exc, tb):
         self.h.close()
-        if isinstance(exc, (OSError, KeyError, RuntimeError)) and not isinstance(exc, FileNotFoundError):
+        # h5py's read errors: OSError/RuntimeError for damaged data, KeyError "Unable to ..." for a
+        # group or dataset a truncated file lacks (a KeyError of this module's own API passes)
+        damaged = isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, FileNotFoundError) or \
+            isinstance(exc, KeyError) and "Unable to" in str(exc)
+        if damaged:
             raise FramesError(self._msg(exc)) from None
         return False
 
