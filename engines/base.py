@@ -236,8 +236,8 @@ class Engine(ABC):
             raise EngineError(f"{self.name} exceeded its wall-clock limit of {timeout:.0f} s and was killed "
                               f"(engine_options.timeout).\n{tail(log)}")
         if proc.returncode != 0:
-            raise EngineError(f"{self.name} failed with exit status {proc.returncode} running {deck}.\n"
-                              f"{self.explain_failure(log)}")
+            raise EngineError(f"{self.name} {_exit_words(proc.returncode)} running {deck}; the run directory keeps "
+                              f"its restart points: run the same command again to resume.\n{self.explain_failure(log)}")
         return res
 
     def explain_failure(self, log: Path) -> str:
@@ -246,6 +246,18 @@ class Engine(ABC):
     def loop_time(self, log: Path) -> float:
         """Seconds the engine spent integrating (its own report), or NaN when unknown."""
         return float("nan")
+
+
+def _exit_words(code: int) -> str:
+    """'failed with exit status N' or 'was killed by signal SIGSEGV (11)' (a negative code, or 128 + the
+    signal from a shell or mpirun)."""
+    sig = -code if code < 0 else code - 128 if 128 < code < 160 else None
+    if sig:
+        try:
+            return f"was killed by signal {signal.Signals(sig).name} ({sig})"
+        except ValueError:
+            pass
+    return f"failed with exit status {code}"
 
 
 def _die_with_parent():
@@ -279,17 +291,27 @@ def tail(path: Path, n: int = 25) -> str:
 
 
 class _Progress:
-    """A rich progress bar with ETA, fed with the engine's step counter."""
+    """A rich progress bar with ETA, fed with the engine's step counter; not on a terminal (a log,
+    a batch job), one line on stderr every :attr:`EVERY` seconds instead."""
+
+    #: seconds between two progress lines when stderr is not a terminal
+    EVERY = 30.0
 
     def __init__(self, label: str, total: int, enabled: bool = True):
+        import sys
         self.p = None
+        self.lines = False
         if not enabled or total <= 0:
+            return
+        self.label, self.total, self.t0 = label, total, time.perf_counter()
+        self.first = None                        # (time, step) of the first report: a resumed run starts late
+        self.next = self.t0 + self.EVERY
+        if not sys.stderr.isatty():
+            self.lines = True
             return
         try:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
-            if not sys.stderr.isatty():
-                return
             self.p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                               TimeElapsedColumn(), TimeRemainingColumn(), transient=True)
             self.p.start()
@@ -300,6 +322,18 @@ class _Progress:
     def update(self, step: int):
         if self.p is not None:
             self.p.update(self.task, completed=step)
+        elif self.lines:
+            import sys
+            now = time.perf_counter()
+            if self.first is None:
+                self.first = (now, step)
+            if now >= self.next:
+                self.next = now + self.EVERY
+                t, s0 = self.first
+                rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
+                eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
+                print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "
+                      f"{now - self.t0:.0f} s{eta}", file=sys.stderr, flush=True)
 
     def close(self):
         if self.p is not None:

@@ -113,13 +113,12 @@ def derive(case) -> dict:
     dt_crit = min(dt_R * damping_factor, dt_H)
     ts = case.timestep
     dt = ts.dt if ts.dt is not None else ts.fraction * dt_crit
-    if dt > dt_crit and not ts.allow_unsafe:
-        raise DerivationError(
-            f"timestep: dt = {dt:.3e} s is above the critical time step {dt_crit:.3e} s "
-            f"(Rayleigh {dt_R:.3e} s for r_min = {r_min:.3e} m; Hertz t_c/{HERTZ_STEPS_PER_CONTACT} = "
-            f"{dt_H / damping_factor:.3e} s at v = {v_max:.3g} m/s; both times {damping_factor:.3f} for the "
-            f"damping ratio {zeta:.3f} of e_n = {e_target}); use timestep.fraction <= 0.3 or a dt below "
-            f"{0.3 * dt_crit:.3e} s, or set timestep.allow_unsafe: true")
+    too_big = None
+    if dt > dt_crit and not ts.allow_unsafe:   # refused below, with this case's largest safe fraction
+        too_big = (f"timestep: dt = {dt:.3e} s is above the critical time step {dt_crit:.3e} s "
+                   f"(Rayleigh {dt_R:.3e} s for r_min = {r_min:.3e} m; Hertz t_c/{HERTZ_STEPS_PER_CONTACT} = "
+                   f"{dt_H / damping_factor:.3e} s at v = {v_max:.3g} m/s; both times {damping_factor:.3f} for the "
+                   f"damping ratio {zeta:.3f} of e_n = {e_target}); ")
     kt_ratio = case.contact.tangential_stiffness_ratio
     params = {
         "material": {"E": E, "nu": nu, "rho": rho, "G": E / (2 * (1 + nu))},
@@ -148,6 +147,12 @@ def derive(case) -> dict:
             "calibrated_at_speed": v_max,
         }
     params["scene"] = mod.derive(case, params)
+    if too_big:
+        from .stability.checks import largest_safe_dt
+        dt_max, binding = largest_safe_dt(case, params)
+        raise DerivationError(too_big + f"the largest safe dt for this case is {dt_max:.3e} s ({binding} limit): use "
+                              f"timestep.fraction <= {int(dt_max / dt_crit * 1000) / 1000:g} or a dt below {dt_max:.3e} s, or set "
+                              "timestep.allow_unsafe: true")
     # every stability limit (Rayleigh, Hertz at the largest speed incl. walls, damping, rolling and
     # twisting springs, skin) and the in-deck monitors' thresholds (orchestrator.stability.checks)
     params["stability"] = check(case, params)

@@ -19,3 +19,11 @@ def running_mean(x, rows: int) -> np.ndarray:
     hi = np.clip(lo + rows, 0, x.size)
     lo = np.clip(hi - rows, 0, x.size)
     return (c[hi] - c[lo]) / (hi - lo)
+
+
+def multiple_of(n: int, k: int) -> int:
+    """``n`` rounded up to a multiple of ``k`` (both positive integers). The scenes put restart steps
+    at the end of a wall-averaging window (LIGGGHTS fix ave/time): a run resumed there writes every
+    window, while one straddling the restart step would be skipped by the resumed fix (measured: one
+    row lost per resume)."""
+    return -(-int(n) // int(k)) * int(k)

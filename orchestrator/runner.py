@@ -10,6 +10,8 @@ from __future__ import annotations
 import fcntl
 import hashlib
 import json
+import os
+import sys
 import shutil
 import time
 from dataclasses import dataclass
@@ -67,10 +69,44 @@ def run_dir_for(case: Case, engine_name: str, runs_root="runs") -> Path:
 
 
 def read_summary(run_dir) -> dict | None:
+    """The run's summary.json; a run found ``running`` whose lock no live process holds (its
+    orchestrator was killed) is marked ``interrupted`` on disk and in the answer."""
     p = Path(run_dir) / "summary.json"
     if not p.exists():
         return None
-    return json.loads(p.read_text())
+    try:
+        s = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return {"status": "interrupted", "error": f"{p}: unreadable (cut short); the run is resumed or redone"}
+    if s.get("status") == "running" and not _lock_held(Path(run_dir)):
+        s["status"] = "interrupted"
+        s["interrupted"] = {"found": time.strftime("%Y-%m-%dT%H:%M:%S"), "pid": s.get("pid"),
+                            "note": "found 'running' with no live owner (its process was killed)"}
+        try:
+            write_json(p, s)
+        except OSError:                  # a read-only run directory: report it, leave the file
+            pass
+    return s
+
+
+def _lock_held(run_dir: Path) -> bool:
+    """True when some live process holds the run directory's lock (flock: released by the kernel
+    when its owner dies, so a stale lock file is never held)."""
+    import fcntl
+    lock = run_dir / ".lock"
+    if not lock.exists():
+        return False
+    try:
+        fh = open(lock, "r")
+    except OSError:
+        return False
+    with fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fh, fcntl.LOCK_UN)
+    return False
 
 
 def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
@@ -115,38 +151,62 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     version = eng.version()
     params = derive(case)
     run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, params)}"
-    old = read_summary(run_dir)
-    if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
-        if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
-            with _RunLock(run_dir):               # the run is reused; its analyses are (re)done
-                t0 = time.perf_counter()
+    if dry_run:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        with _RunLock(run_dir):
+            return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
+    if force and run_dir.exists():
+        if _lock_held(run_dir):
+            raise EngineError(f"{run_dir} is being run by another process; wait for it or stop it before --force")
+        shutil.rmtree(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    # under the lock (waiting for a process that runs the same case: its result is then reused)
+    with _RunLock(run_dir, wait=True):
+        old = read_summary(run_dir)
+        if old and old.get("status") == "complete" and not force:
+            from .integrity import verify_run
+            damaged = verify_run(run_dir, old)
+            if any(not name.startswith("analysis") for name, _ in damaged):
+                _say(f"{run_dir}: the complete run is damaged, so it is redone: "
+                     + "; ".join(msg for _, msg in damaged))
+                old = dict(old, status="damaged", damaged=[m for _, m in damaged])
+                _clear_results(run_dir)
+            elif damaged:
+                _say(f"{run_dir}: analysis outputs damaged, so the analyses are redone: "
+                     + "; ".join(msg for _, msg in damaged))
+                old["analysis_specs"] = None
+        if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force:
+            if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
+                t0 = time.perf_counter()              # the run is reused; its analyses are (re)done
                 old["analysis"] = run_case_analyses(case, run_dir)
                 old["analysis_specs"] = case.analysis
                 old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
+                from .integrity import run_record
+                old["integrity"] = run_record(run_dir, old["analysis"])
                 write_json(run_dir / "summary.json", old)
-        return RunOutcome(run_dir, "complete", old, reused=True)
-    if old and old.get("status") == "unstable" and not force and not dry_run:
-        return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
-    if force and run_dir.exists():
-        shutil.rmtree(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    with _RunLock(run_dir):
+            return RunOutcome(run_dir, "complete", old, reused=True)
+        if old and old.get("status") == "unstable" and not force:
+            return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
         return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
 
 
 class _RunLock:
     """An exclusive lock on a run directory (flock), so two processes never drive one run."""
 
-    def __init__(self, run_dir: Path):
+    def __init__(self, run_dir: Path, wait: bool = False):
         self.path = run_dir / ".lock"
+        self.wait = wait
 
     def __enter__(self):
         self.fh = open(self.path, "w")
         try:
             fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            self.fh.close()
-            raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+            if not self.wait:
+                self.fh.close()
+                raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+            _say(f"{self.path.parent} is being run by another process; waiting for it (its result is then reused)")
+            fcntl.flock(self.fh, fcntl.LOCK_EX)
         return self
 
     def __exit__(self, *exc):
@@ -176,7 +236,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
                                                           "forced")} if "stability" in params else None,
         "estimated_engine_time_s": estimate,
         "substitutions": [s.as_dict() for s in subs],
-        "wall_time": timings, "resumed_from": resume,
+        "wall_time": timings, "resumed_from": resume, "pid": os.getpid(),
     }
     if dry_run:
         write_json(run_dir / "summary.json", summary)
@@ -223,6 +283,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         timings["analysis"] = time.perf_counter() - t3
     timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop"))
     summary["wall_time"] = timings
+    from .integrity import run_record
+    summary["integrity"] = run_record(run_dir, summary.get("analysis"))
     write_json(run_dir / "summary.json", summary)
     # only now, with the complete summary on disk, are the resume points no longer needed
     summary["resume_points_removed_bytes"] = drop_resume_points(run_dir)
@@ -230,12 +292,31 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     return RunOutcome(run_dir, "complete", summary)
 
 
+def _say(msg: str) -> None:
+    """A note for the user on stderr (the runner has no console of its own)."""
+    print(f"note: {msg}", file=sys.stderr)
+
+
+def _clear_results(run_dir: Path) -> None:
+    """Empty a damaged complete run's directory (all but its lock, which the caller holds) so that
+    it is redone from the start: its resume points were dropped when it completed, and what is left
+    of its engine output must not mix into the new run."""
+    for f in run_dir.iterdir():
+        if f.name == ".lock":
+            continue
+        if f.is_dir() and not f.is_symlink():
+            shutil.rmtree(f, ignore_errors=True)
+        else:
+            f.unlink(missing_ok=True)
+
+
 def drop_resume_points(run_dir: Path) -> int:
     """Delete a complete run's LIGGGHTS restart files and YADE checkpoints (a complete run is
     reused, never resumed; on the seed triaxial case they would hold ~60 x 6 MB). Returns the bytes
     freed."""
     freed = 0
-    for f in [*Path(run_dir).glob("restart/*.restart"), *Path(run_dir).glob("checkpoint*.yade.gz")]:
+    for f in [*Path(run_dir).glob("restart/*.restart"), *Path(run_dir).glob("checkpoint*.yade.gz"),
+              *Path(run_dir).glob("restart_forced_*")]:       # LIGGGHTS' own restart when killed
         try:
             freed += f.stat().st_size
             f.unlink()
@@ -262,6 +343,8 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
     total = params["scene"].get("total_steps", params["scene"]["steps"])
     timeout = case.engine_options.timeout
     candidates = (resume or {}).get("candidates", [])
+    if resume is None and hasattr(eng, "prepare_resume"):
+        eng.prepare_resume(run_dir, {"step": -1})           # a fresh start: no frame segment of an older try
     for cand in candidates[1:] + [None]:
         try:
             return eng.run(deck, case, total, log, timeout, progress), resume
@@ -272,8 +355,8 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
             resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand,
                                                     step=_restart_step(cand, resume))
             resume = _scene_resume(case, eng.name, run_dir, resume)
-            if resume is not None and hasattr(eng, "prepare_resume"):
-                eng.prepare_resume(run_dir, resume)
+            if hasattr(eng, "prepare_resume"):
+                eng.prepare_resume(run_dir, resume or {"step": -1})
             deck = eng.render(case, params, run_dir, resume=resume)
     raise EngineError("unreachable")  # pragma: no cover
 

@@ -199,6 +199,7 @@ class Liggghts(Engine):
             for seg in dump_segments(run_dir):
                 if truncate_binary_dump(seg, n, resume["step"]) == 0:
                     seg.unlink()
+        cut_wall_series(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
@@ -365,3 +366,19 @@ def read_contacts(path) -> dict | None:
     normal = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
     return {"i": a[:, 6].astype(np.int64), "j": a[:, 7].astype(np.int64), "point": a[:, 15:18],
             "normal": normal, "fn": a[:, 9:12], "ft": a[:, 12:15]}
+
+
+def cut_wall_series(run_dir: Path, step: int) -> None:
+    """Cut the wall series a deck writes with ``fix ave/time ... file walls.<start step>.txt`` back to
+    the rows of steps <= ``step`` (a resumed run writes its own file from there; rows after the
+    restart step would appear twice); a file begun after ``step`` is removed."""
+    for f in Path(run_dir).glob("walls.*.txt"):
+        start = f.name.split(".")[1]
+        if start.isdigit() and int(start) > step:
+            f.unlink()
+            continue
+        lines = f.read_text().splitlines(keepends=True)
+        keep = [ln for ln in lines if ln.startswith("#") or not ln.split() or int(float(ln.split()[0])) <= step]
+        if len(keep) != len(lines):
+            from orchestrator.atomic import write_text
+            write_text(f, "".join(keep))

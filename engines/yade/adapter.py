@@ -130,8 +130,10 @@ class Yade(Engine):
         return {"checkpoint": ck.name, "candidates": [ck.name]}
 
     def prepare_resume(self, run_dir: Path, resume: dict):
-        """Drop frame chunks written after the checkpoint (they will be written again)."""
-        ck_time = (Path(run_dir) / "checkpoint.yade.gz").stat().st_mtime
+        """Drop frame chunks written after the checkpoint (they will be written again); a fresh
+        start (step < 0) drops them all."""
+        ck = Path(run_dir) / "checkpoint.yade.gz"
+        ck_time = ck.stat().st_mtime if resume.get("step", 0) >= 0 and ck.exists() else float("-inf")
         for f in chunk_files(run_dir):
             if f.stat().st_mtime > ck_time:
                 f.unlink()

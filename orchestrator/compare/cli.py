@@ -48,6 +48,16 @@ def cmd_compare(args) -> int:
     opts = _parse_options(args.option)
     if args.states:
         opts["states"] = args.states
+    diffs, kinds = case_differences(args.a, args.b)
+    if diffs and len(kinds) > 1 and not args.different_cases:
+        print(f"error: {args.a} and {args.b} are runs of different scenes ({' vs '.join(kinds)}); nothing in them "
+              "matches state by state. Differences: " + "; ".join(diffs[:8])
+              + ". Compare runs of one case (on two engines), or give --different-cases to compare anyway",
+              file=sys.stderr)
+        return 2
+    if diffs:
+        print(f"warning: {args.a} and {args.b} are runs of different cases: " + "; ".join(diffs[:8])
+              + (f" (and {len(diffs) - 8} more)" if len(diffs) > 8 else ""), file=sys.stderr)
     out = Path(args.out) if args.out else Path("compare") / f"{Path(args.a).name}__vs__{Path(args.b).name}"
     cmp = compare(args.a, args.b, out_dir=out, measures=args.measure, options=opts, control=args.control,
                   tolerance=args.tolerance, frame=args.frame, identity=not args.no_identity,
@@ -91,6 +101,39 @@ def cmd_ladder(args, con) -> int:
     return 0
 
 
+#: case fields that do not change what a run simulates (how it is launched, what is done after)
+_NOT_PHYSICS = ("name", "description", "engines", "engine_options", "analysis", "ct")
+
+
+def case_differences(a, b) -> tuple[list[str], list[str]]:
+    """The fields (dotted paths) in which the simulated cases of two sources differ, and their scene
+    kinds; empty when either is not a simulation (a CT frame set) or carries no case."""
+    from ..frames import Frames
+    cases = []
+    for src in (a, b):
+        try:
+            meta = Frames(src).meta
+        except (FileNotFoundError, ValueError, OSError):
+            return [], []
+        case = meta.get("case")
+        if meta.get("source") != "simulation" or not isinstance(case, dict):
+            return [], []
+        cases.append(case)
+    out: list[str] = []
+
+    def walk(x, y, path):
+        if isinstance(x, dict) and isinstance(y, dict):
+            for k in sorted(set(x) | set(y)):
+                if not path and k in _NOT_PHYSICS:
+                    continue
+                walk(x.get(k), y.get(k), f"{path}.{k}" if path else k)
+        elif x != y:
+            out.append(f"{path}: {x!r} vs {y!r}" if len(repr(x)) + len(repr(y)) < 80 else f"{path} differs")
+    walk(cases[0], cases[1], "")
+    kinds = sorted({str((c.get("scene") or {}).get("kind")) for c in cases})
+    return out, kinds
+
+
 def cmd_crossval(args) -> int:
     from rich.console import Console
     from .crossval import crossval
@@ -131,6 +174,7 @@ def add_parsers(sub) -> None:
     c.add_argument("--tolerance", type=float, help="largest control difference of matched states (SI)")
     c.add_argument("--frame", choices=["none", "centroid", "rigid"], default="none",
                    help="coordinate alignment of B onto A (default none: same world frame)")
+    c.add_argument("--different-cases", action="store_true", help="compare runs of different scenes anyway")
     c.add_argument("--no-identity", action="store_true", help="skip grain identity and the grain-by-grain errors")
     c.add_argument("--max-distance", type=float, help="position-matching cut-off [m] (default d50/2)")
     c.add_argument("--atol", type=float, default=0.1, help="displacement agreement: absolute tolerance [d50]")

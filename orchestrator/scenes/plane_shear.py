@@ -32,6 +32,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ..case import Strict, positive
+from ..numerics import multiple_of
 from ..derive import adhesion_force, DerivationError
 from ..particles_io import ensure_particle_table
 from ..psd import lognormal_diameters, mean_sphere_volume
@@ -215,7 +216,7 @@ def derive(case, common: dict) -> dict:
         "geometry": g, "box_lo": g["box_lo"], "box_hi": g["box_hi"],
         "stages": {"compress": [0, s1], "shear": [s1, s2]}, "steps": s2, "total_steps": s2,
         "events": events, "frame_steps": frame_steps, "frame_stage": frame_stage,
-        "dump_every": max(1, s2), "restart_every": max(1000, s2 // 5), "wall_every": wall_every,
+        "dump_every": max(1, s2), "restart_every": multiple_of(max(1000, s2 // 5), wall_every), "wall_every": wall_every,
         "servo": {"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo,
                   "travel": travel},
         "v_shear": v_shear, "shear_rate": gamma_dot, "skin": skin,

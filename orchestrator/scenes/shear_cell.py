@@ -38,6 +38,7 @@ from scipy.integrate import solve_ivp
 from ..atomic import write_json
 from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
+from ..numerics import multiple_of
 from ..geometry import cylinder_shell, vaned_piston, write_stl
 from ..particles_io import ensure_particle_table
 from ..psd import lognormal_diameters, mean_sphere_volume, pack_cylinder
@@ -378,7 +379,7 @@ def derive(case, common: dict) -> dict:
         "stages": {"relax": [s0, s1], "compress": [s1, s2], "shear": [s2, s3]},
         "steps": s3, "total_steps": s3,
         "events": events, "frame_steps": frame_steps, "frame_angles": frame_angles, "frame_stage": frame_stage,
-        "dump_every": max(1, s3), "restart_every": max(1000, s3 // 10), "wall_every": wall_every,
+        "dump_every": max(1, s3), "restart_every": multiple_of(max(1000, s3 // 10), wall_every), "wall_every": wall_every,
         "average_window_steps": max(wall_every, int(math.ceil(s.average_window * n_settle))),
         "gamma_visc": gamma_visc, "yade_drag_nu": gamma_visc / (6 * math.pi * x50 / 2),
         "relax_tau_steps": tau_steps, "m50": m50,

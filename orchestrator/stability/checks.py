@@ -161,6 +161,14 @@ def safe_fractions(case) -> dict:
                                                               "contact_time", "rolling", "twisting", "skin")}
 
 
+def largest_safe_dt(case, params: dict) -> tuple[float, str]:
+    """(largest dt [s] within every stability limit's safe fraction, the binding limit)."""
+    cs = critical_steps(case, params)
+    safe = safe_fractions(case)
+    binding = min(cs["limits"], key=lambda k: cs["limits"][k] * safe[k])
+    return cs["limits"][binding] * safe[binding], binding
+
+
 def check(case, params: dict) -> dict:
     """The stability report for ``params['dt']``; raises DerivationError when dt is above a safe
     fraction of any limit and the case does not set ``timestep.allow_unsafe``."""
@@ -191,7 +199,8 @@ def check(case, params: dict) -> dict:
             f"largest expected speed {cs['speed']:.3g} m/s (walls: "
             + (", ".join(f"{n} {s:.3g} m/s" for n, s in cs["wall_speeds"].items()) or "none")
             + f"), confining stress {cs['confining_stress']:.3g} Pa, skin {cs['skin']:.3g} m. "
-            f"The largest safe dt is {dt_max:.3e} s ({binding}); lower timestep.fraction or dt, "
+            f"The largest safe dt is {dt_max:.3e} s ({binding}): use timestep.fraction <= "
+            f"{int(dt_max / params['dt_critical'] * 1000) / 1000:g} or a dt below {dt_max:.3e} s, "
             "or set timestep.allow_unsafe: true to run anyway (the monitors still watch the run)")
     return report
 
