@@ -367,8 +367,7 @@ def _allowed_fields(loc: tuple, scene_kind: str | None = None) -> list[str]:
             continue
         fields = getattr(model, "model_fields", {})
         if part == "scene" and model is Case and scene_kind:
-            from .scenes import scene_module
-            model = scene_module(scene_kind).Scene
+            model = get_scene(scene_kind).section
         elif part in fields:
             ann = fields[part].annotation
             model = _first_model(ann)
@@ -437,8 +436,7 @@ def _field_default(loc: tuple, kind: str | None):
         if isinstance(part, int):
             continue
         if part == "scene" and model is Case and kind:
-            from .scenes import scene_module
-            model = scene_module(kind).Scene
+            model = get_scene(kind).section
             continue
         f = getattr(model, "model_fields", {}).get(part)
         if f is None:
