@@ -109,6 +109,28 @@ def _closing_results(run_dir, con) -> None:
     print_key_results(run_dir, con)
 
 
+def cmd_clock(args) -> int:
+    """``orchestrator clock show|refresh``: the fitted cost model per engine and scene."""
+    from rich.table import Table
+    from .clock import load_table, package_table_path, refresh, user_table_path
+    con = _console()
+    if args.action == "refresh":
+        out = package_table_path() if args.package else user_table_path()
+        fitted = refresh(args.runs, out)
+        n = sum(tp.runs for scenes in fitted.values() for tp in scenes.values())
+        con.print(f"fitted {sum(len(v) for v in fitted.values())} engine/scene model(s) from {n} complete run(s); "
+                  f"wrote {out}")
+    t = Table(title="run-time model: t = startup + steps (a + b n) / (1 + e (workers - 1))")
+    for col in ("engine", "scene", "startup [s]", "a [µs/step]", "b [ns/(particle step)]", "e", "runs", "note"):
+        t.add_column(col)
+    for eng, scenes in sorted(load_table().items()):
+        for sc, tp in sorted(scenes.items()):
+            t.add_row(eng, sc, f"{tp.startup_s:.2f}", f"{tp.per_step_s * 1e6:.1f}", f"{tp.per_particle_step_s * 1e9:.1f}",
+                      f"{tp.parallel_efficiency:.2f}", str(tp.runs), tp.note)
+    con.print(t)
+    return 0
+
+
 def cmd_engines(args) -> int:
     from rich.table import Table
     from engines.base import FEATURES
@@ -233,6 +255,13 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
 
     e = sub.add_parser("engines", help="installed engines, versions and capabilities")
     e.set_defaults(func=cmd_engines)
+
+    ck = sub.add_parser("clock", help="the run-time model: show it, or refit it from complete runs")
+    ck.add_argument("action", choices=["show", "refresh"])
+    ck.add_argument("runs", nargs="*", default=["runs"], help="run directories or runs/ trees (refresh)")
+    ck.add_argument("--package", action="store_true",
+                    help="write the shipped table benchmarks/throughput.json (in a checkout) instead of the user table")
+    ck.set_defaults(func=cmd_clock)
 
     vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")
     vf.add_argument("--engine", choices=[*engine_names(), "all"], default="all")

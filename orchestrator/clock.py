@@ -17,23 +17,26 @@ Model (per engine and scene, fitted from completed runs)::
 over the stored runs of one engine and scene (scipy.optimize.nnls). One run fixes only the sum:
 then ``a = 0`` and the fit is flagged ``one size``.
 
-The table lives in package data (``orchestrator/data/throughput.json``); a user table in
-``$ORCHESTRATOR_THROUGHPUT`` or ``$XDG_DATA_HOME/orchestrator/throughput.json`` takes precedence.
-``orchestrator clock refresh RUNS…`` refits it from the ``summary.json`` of complete runs.
+The table lives in package data (``benchmarks/throughput.json``, shipped through
+``orchestrator/_data``); a user table in ``$ORCHESTRATOR_THROUGHPUT`` or
+``$XDG_DATA_HOME/orchestrator/throughput.json`` takes precedence.
+``orchestrator clock refresh RUNS…`` refits it from the ``summary.json`` of complete runs (in a
+checkout, ``--package`` writes the shipped table itself).
 """
 from __future__ import annotations
 
 import json
 import os
 from dataclasses import asdict, dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 from scipy.optimize import nnls
 
+from .resources import data_file
+
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "samples_from_runs", "fit",
-           "refresh", "user_table_path", "ASSUMED_PARALLEL_EFFICIENCY"]
+           "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -68,12 +71,14 @@ class RunSample:
     source: str = field(default="", compare=False)
 
 
+def package_table_path() -> Path:
+    """The shipped table (``benchmarks/throughput.json`` of the project, package data)."""
+    return data_file("benchmarks/throughput.json")
+
+
 def _package_table() -> dict:
-    try:
-        text = resources.files("orchestrator").joinpath("data/throughput.json").read_text()
-    except (FileNotFoundError, ModuleNotFoundError, OSError):
-        return {}
-    return json.loads(text)
+    p = package_table_path()
+    return json.loads(p.read_text()) if p.is_file() else {}
 
 
 def user_table_path() -> Path:
@@ -123,19 +128,18 @@ def _sample(run_dir: Path) -> RunSample | None:
     if not isinstance(wt.get("engine"), (int, float)):
         return None
     sc = p.get("scene") or {}
-    n = int(sc.get("n") or len(sc.get("ids") or []) or 0)
+    n = int(s.get("n_particles") or sc.get("n") or len(sc.get("ids") or []) or 0)
     steps = int(s.get("steps_run") or s.get("steps") or 0)
     if n <= 0 or steps <= 0:
         return None
-    kind = (p.get("scene_kind") or s.get("scene") or "")
+    kind = s.get("scene") or ""
     if not kind:
         try:
             import yaml
             kind = (yaml.safe_load((run_dir / "case.yaml").read_text()).get("scene") or {}).get("kind", "")
         except (OSError, ValueError, AttributeError):
             kind = ""
-    opts = s.get("engine_options") or {}
-    ranks = int(opts.get("mpi_ranks") if s.get("engine") == "liggghts" else opts.get("threads") or 1) if opts else 1
+    ranks = int(s.get("workers") or 1)
     loop = wt.get("engine_loop") if isinstance(wt.get("engine_loop"), (int, float)) else wt["engine"]
     return RunSample(s["engine"], kind, n, steps, max(ranks, 1), float(wt["engine"]), float(loop), str(run_dir))
 

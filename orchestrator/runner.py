@@ -24,6 +24,7 @@ from engines.render import templates_hash
 
 from .atomic import write_json, write_text
 from .case import Case
+from .clock import estimate_engine_time
 from .derive import derive
 from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
@@ -110,18 +111,18 @@ def _lock_held(run_dir: Path) -> bool:
 
 
 def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
-    """Engine wall time [s] estimated from the derived step count, particle count and the
-    engine's throughput (benchmarks/throughput.json, shipped as package data, when measured; else
-    the adapter's own figures, :attr:`engines.base.Engine.throughput`)."""
+    """Engine wall time [s] estimated from the derived step count and particle count with the cost
+    model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps (a + b n)
+    / S(workers) per engine and scene); an engine or scene never measured falls back to the adapter's
+    bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck runs."""
     eng = get_engine(engine_name)
-    tp = eng.throughput
-    stored = data_file("benchmarks/throughput.json")
-    if stored.is_file():
-        tp = json.loads(stored.read_text()).get(engine_name, tp)
     sc = params["scene"]
     n = sc.get("n", len(sc.get("ids", [])))
     steps = sc.get("total_steps", sc["steps"])
-    return eng.startup + steps * max(n, 1) / (tp * eng.workers(case))
+    t, _basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
+    if t == t:         # not NaN: a measured model
+        return t
+    return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case))
 
 
 def prepare(case: Case, engine_name: str, run_dir: Path, params: dict | None = None) -> tuple[dict, list]:
@@ -235,6 +236,9 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         "stability": {k: params["stability"][k] for k in ("limits", "fractions", "binding", "dt_max_safe", "ok",
                                                           "forced")} if "stability" in params else None,
         "estimated_engine_time_s": estimate,
+        # what the run-time model (orchestrator.clock) is fitted on
+        "scene": case.scene.kind, "n_particles": int(params["scene"].get("n", len(params["scene"].get("ids", [])))),
+        "workers": eng.workers(case),
         "substitutions": [s.as_dict() for s in subs],
         "wall_time": timings, "resumed_from": resume, "pid": os.getpid(),
     }
