@@ -1,0 +1,63 @@
+"""Estimate against actual engine time, for every complete run found (issue #15: within ±30 %).
+
+    .venv/bin/python benchmarks/bench_estimate.py [RUNS_TREE ...] [--run CASE ...] [--engine E ...]
+
+With ``--run``, the named cases are first run (or reused) under ``benchmarks/runs-estimate/``.
+For every complete, un-resumed run it prints the engine time the model predicts
+(:mod:`orchestrator.clock`) in two ways:
+
+- ``table``: with the shipped/user table as it is (what ``validate`` and ``run --dry-run`` print);
+- ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
+  predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind).
+
+Then ``orchestrator clock refresh RUNS --package`` stores the fit of all of them.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from orchestrator.case import load_case
+from orchestrator.clock import estimate_engine_time, fit, load_table, samples_from_runs
+from orchestrator.runner import run_case
+
+HERE = Path(__file__).resolve().parent
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="*", help="run directories or runs/ trees")
+    ap.add_argument("--run", action="append", default=[], help="case file to run first (repeatable)")
+    ap.add_argument("--engine", action="append", help="engines for --run (default the case's)")
+    a = ap.parse_args(argv)
+    roots = [Path(r) for r in a.runs]
+    if a.run:
+        root = HERE / "runs-estimate"
+        for path in a.run:
+            case = load_case(path)
+            for eng in a.engine or case.engines:
+                out = run_case(case, eng, runs_root=root, progress=False, analyze=False)
+                print(f"{case.name} {eng}: {out.status} ({'reused' if out.reused else 'ran'})")
+        roots.append(root)
+    samples = samples_from_runs(roots)
+    table = load_table()
+    print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'w':>2s} {'actual s':>9s} "
+          f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s}  run")
+    worst = 0.0
+    for s in samples:
+        est, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, s.steps, s.ranks, table=table)
+        others = [o for o in samples if (o.engine, o.scene) == (s.engine, s.scene) and o.source != s.source]
+        loo = fit(others).engine_time(s.n_particles, s.steps, s.ranks) if others else math.nan
+        r1 = est / s.engine_s if est == est else math.nan
+        r2 = loo / s.engine_s if loo == loo else math.nan
+        if r2 == r2:
+            worst = max(worst, abs(r2 - 1))
+        print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {s.ranks:2d} {s.engine_s:9.1f} "
+              f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f}  {Path(s.source).name}")
+    print(f"largest leave-one-out error: {100 * worst:.0f} % (floor: 30 %)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
