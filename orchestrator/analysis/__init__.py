@@ -5,7 +5,8 @@ Each measure is an array function (arrays in, arrays/DataFrames out, SI) plus an
 A :class:`~._common.Result` holds DataFrames (``.tables``), scalars and ``.plot() -> Figure``.
 
 >>> from orchestrator import load
->>> from orchestrator.analysis import ANALYSES, run_analyses
+>>> from orchestrator.analysis import ANALYSES, run_analyses, d2min
+>>> out = d2min(ref_xyz, cur_xyz, cutoff=1.5 * d50, wall_distance=d50)   # doctest: +SKIP
 >>> fr = load("runs/triaxial_small/liggghts-abc")                    # doctest: +SKIP
 >>> res = ANALYSES["d2min"](fr, interval=0.01)                        # doctest: +SKIP
 >>> res.tables["particles"].head(); res.plot()                        # doctest: +SKIP
@@ -19,22 +20,45 @@ import time
 import traceback
 from pathlib import Path
 
-from ._common import Result, atomic_savefig, atomic_write_csv, atomic_write_json
-from .clusters import analyze_clusters
-from .coordination import analyze_coordination
-from .d2min import analyze_d2min
-from .energy import analyze_energy
-from .displacements import analyze_displacements
-from .fabric import analyze_fabric
-from .forcechains import analyze_forcechains
-from .friction import analyze_friction
-from .profiles import analyze_profiles
-from .rdf import analyze_rdf
-from .shearband import analyze_shearband
-from .stress import analyze_stress
-from .triaxial import analyze_triaxial
+from ..frames import Frames
+from ._common import Result, atomic_savefig, atomic_write_csv, atomic_write_json, d50, frame_indices, frame_pairs
+from .clusters import analyze_clusters, cluster_properties, find_clusters
+from .containers import Box, Cylinder, infer_container, make_container
+from .coordination import analyze_coordination, coordination_from_pairs, frame_contacts, neighbor_counts
+from .d2min import analyze_d2min, d2min, local_strain
+from .displacements import analyze_displacements, incremental_displacements
+from .energy import analyze_energy, effective_modulus, hertz_normal_energy, kinetic_energy, nonaffine_kinetic_energy
+from .fabric import analyze_fabric, anisotropy, contact_vectors, fabric_tensor, rose
+from ._fits import erf_profile, fractal_dimension, powerlaw_fit
+from .forcechains import analyze_forcechains, force_chains
+from .friction import analyze_friction, mu_macro
+from .neighbors import contacts_to_rows, geometric_contacts, pairs_within
+from .profiles import analyze_profiles, density_profile
+from .rdf import analyze_rdf, pair_counts, rdf
+from .shearband import analyze_shearband, angular_profiles, fit_erf_profile, rotation_center
+from .stress import analyze_stress, deviatoric_q, love_weber_stress, particle_stress, volatility
+from .triaxial import (analyze_triaxial, dilatancy_angle, friction_angle, local_slope, plot_triaxial_runs,
+                       running_mean, triaxial_curves)
 
-__all__ = ["ANALYSES", "run_analyses", "parse_specs", "Result"]
+#: the array functions (arrays in, arrays / DataFrames out), importable by name:
+#: ``from orchestrator.analysis import d2min, rdf, neighbor_counts`` gives the functions (the modules
+#: of the same name stay importable as ``orchestrator.analysis.d2min`` etc. through ``from ... import``)
+ARRAY_FUNCTIONS = [
+    "d2min", "local_strain", "rdf", "pair_counts", "neighbor_counts", "coordination_from_pairs",
+    "frame_contacts", "pairs_within", "geometric_contacts", "contacts_to_rows", "find_clusters",
+    "cluster_properties", "powerlaw_fit", "fractal_dimension", "erf_profile", "fit_erf_profile",
+    "rotation_center", "angular_profiles", "density_profile", "incremental_displacements",
+    "fabric_tensor", "anisotropy", "rose", "contact_vectors", "force_chains", "mu_macro",
+    "deviatoric_q", "love_weber_stress", "volatility", "particle_stress", "kinetic_energy",
+    "nonaffine_kinetic_energy", "hertz_normal_energy", "effective_modulus", "running_mean",
+    "local_slope", "friction_angle", "dilatancy_angle", "triaxial_curves", "d50", "frame_pairs",
+    "frame_indices", "infer_container", "make_container", "Box", "Cylinder",
+]
+
+__all__ = ["ANALYSES", "run_analyses", "parse_specs", "Result", "Frames", "plot_triaxial_runs",
+           *ARRAY_FUNCTIONS, *(f"analyze_{k}" for k in (
+               "clusters", "coordination", "d2min", "displacements", "energy", "fabric", "forcechains",
+               "friction", "profiles", "rdf", "shearband", "stress", "triaxial"))]
 
 #: name -> callable(frames, **options) -> Result
 ANALYSES = {
@@ -95,7 +119,6 @@ def run_analyses(frames, specs, out_dir, plots: bool = True, raise_errors: bool 
     Returns ``{label: {"name", "status", "options", "scalars", "files", "seconds", ["error"]}}``.
     """
     if not hasattr(frames, "position"):
-        from ..frames import Frames
         frames = Frames(frames)
     parsed = parse_specs(specs)
     out = Path(out_dir)

@@ -183,6 +183,8 @@ def atomic_savefig(fig, path, dpi: int = 120) -> Path:
 
 def save_figure(fig, path, dpi: int = 120) -> Path:
     """Save ``fig`` atomically as PNG (creating the folder) and close it; returns the path."""
+    # pyplot here, not at module top: importing it there would fix matplotlib's backend before
+    # plots.py selects Agg, for every user of the analysis package
     import matplotlib.pyplot as plt
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -19,8 +19,11 @@ from scipy import optimize, special
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ._fits import fractal_dimension, powerlaw_fit
 from ._common import Result, d50, present, sphere_volume
 from .neighbors import pairs_within
+from .d2min import analyze_d2min
+from .plots import plot_clusters
 
 __all__ = ["find_clusters", "cluster_properties", "powerlaw_fit", "fractal_dimension", "analyze_clusters"]
 
@@ -67,50 +70,6 @@ def cluster_properties(position: np.ndarray, volume: np.ndarray, labels: np.ndar
                          "z": c[:, 2], "rg": rg})
 
 
-def powerlaw_fit(sizes, s_min: int = 1) -> dict:
-    """Discrete power-law MLE P(s) = s^(−τ)/ζ(τ, s_min) for s >= s_min.
-
-    Returns ``tau``, ``tau_err`` (1/sqrt of the observed Fisher information), ``n`` (clusters
-    used), ``s_min``. NaN when fewer than 5 clusters.
-    """
-    s = np.asarray(sizes, float)
-    s = s[s >= s_min]
-    n = len(s)
-    if n < 5 or np.all(s == s_min):
-        return {"tau": np.nan, "tau_err": np.nan, "n": n, "s_min": s_min}
-    sl = np.sum(np.log(s))
-
-    def nll(t):
-        return n * np.log(special.zeta(t, s_min)) + t * sl
-
-    r = optimize.minimize_scalar(nll, bounds=(1.0001, 10.0), method="bounded", options={"xatol": 1e-8})
-    t = float(r.x)
-    h = 1e-4 * max(t, 1)
-    curv = (nll(t + h) - 2 * nll(t) + nll(t - h)) / h ** 2
-    err = 1.0 / np.sqrt(curv) if curv > 0 else np.nan
-    return {"tau": t, "tau_err": float(err), "n": n, "s_min": s_min}
-
-
-def fractal_dimension(sizes, rg, s_min: int = 3) -> dict:
-    """Fit R_g = A s^(1/d_f) on clusters with s >= s_min (least squares in log–log).
-
-    Returns ``d_f``, ``d_f_err``, ``slope`` (1/d_f), ``slope_err``, ``n`` (clusters used).
-    """
-    s = np.asarray(sizes, float)
-    rg = np.asarray(rg, float)
-    m = (s >= s_min) & (rg > 0) & np.isfinite(rg)
-    if m.sum() < 3 or len(np.unique(s[m])) < 2:
-        return {"d_f": np.nan, "d_f_err": np.nan, "slope": np.nan, "slope_err": np.nan, "n": int(m.sum())}
-    x, y = np.log(s[m]), np.log(rg[m])
-    A = np.c_[x, np.ones_like(x)]
-    coef, res, *_ = np.linalg.lstsq(A, y, rcond=None)
-    dof = max(len(x) - 2, 1)
-    sig2 = float(np.sum((y - A @ coef) ** 2) / dof)
-    cov = sig2 * np.linalg.inv(A.T @ A)
-    slope, se = float(coef[0]), float(np.sqrt(cov[0, 0]))
-    return {"d_f": 1.0 / slope, "d_f_err": se / slope ** 2, "slope": slope, "slope_err": se, "n": int(m.sum())}
-
-
 def analyze_clusters(frames, top_fraction: float = 0.1, cutoff: float | None = None, cutoff_d50: float = 1.5,
                      s_min: int = 1, s_min_rg: int = 3, d2min_result=None, **d2min_options) -> Result:
     """Clusters of the top ``top_fraction`` D²min particles for each D²min frame pair.
@@ -124,8 +83,6 @@ def analyze_clusters(frames, top_fraction: float = 0.1, cutoff: float | None = N
     (s, count, p: pooled over all pairs, as the seed pools 8–18 % strain), ``particles`` (frame0,
     frame1, id, label). Scalars: ``tau``, ``tau_err``, ``d_f``, ``d_f_err`` of the pooled data.
     """
-    from .d2min import analyze_d2min
-    from .plots import plot_clusters
     dd = d50(frames.radius)
     cut = float(cutoff) if cutoff is not None else cutoff_d50 * dd
     if d2min_result is None:

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy.spatial import cKDTree
 
-from ._common import Result, control_values, frame_indices, present
-from .neighbors import contacts_to_rows, geometric_contacts
+from ._cells import CellList, count_within
+from ._common import Result, control_values, d50, frame_indices, present
+from .neighbors import contacts_to_rows, geometric_contacts, pairs_within
+from .containers import make_container
+from .plots import plot_coordination
 
 __all__ = ["coordination_from_pairs", "neighbor_counts", "frame_contacts", "analyze_coordination"]
 
@@ -35,18 +37,15 @@ def coordination_from_pairs(n: int, i: np.ndarray, j: np.ndarray, mask: np.ndarr
 
 def neighbor_counts(position: np.ndarray, cutoff: float) -> np.ndarray:
     """Number of other centres within ``cutoff`` [m] of each centre (OVITO's "Coordination");
-    NaN for absent rows."""
-    p = np.asarray(position, float)
-    ok = present(p)
-    tree = cKDTree(p[ok])
-    c = tree.query_ball_point(p[ok], cutoff, return_length=True) - 1
-    out = np.full(len(p), np.nan)
-    out[ok] = c
-    return out
+    NaN for absent rows. Compiled cell-list count (:mod:`._cells`)."""
+    c = count_within(CellList(position, cutoff)).astype(float)
+    c[c < 0] = np.nan
+    return c
 
 
-def frame_contacts(frames, k: int, source: str = "auto", tolerance: float = 0.0):
-    """(i_rows, j_rows, source_used) for frame k (walls as -1 rows when from the contact list)."""
+def frame_contacts(frames, k: int, source: str = "auto", tolerance: float = 0.0, cutoff: float | None = None):
+    """(i_rows, j_rows, source_used, contact arrays or None) for frame k (walls as -1 rows when from
+    the contact list). ``source="cutoff"``: every pair of centres within ``cutoff`` [m]."""
     if source == "auto":
         source = "contacts" if k in getattr(frames, "contact_frames", []) else "geometry"
     if source == "contacts":
@@ -56,25 +55,37 @@ def frame_contacts(frames, k: int, source: str = "auto", tolerance: float = 0.0)
     if source == "geometry":
         i, j = geometric_contacts(frames.position[k], frames.radius, tolerance)
         return i, j, "geometry", None
-    raise ValueError(f"coordination source must be 'auto', 'contacts' or 'geometry', got {source!r}")
+    if source == "cutoff":
+        if cutoff is None:
+            raise ValueError("coordination source 'cutoff' needs a cutoff [m]")
+        i, j = pairs_within(frames.position[k], cutoff)
+        return i, j, "cutoff", None
+    raise ValueError(f"coordination source must be 'auto', 'contacts', 'geometry' or 'cutoff', got {source!r}")
 
 
 def analyze_coordination(frames, at=None, control: str | None = None, stride: int | None = None,
                          source: str = "auto", tolerance: float = 0.0, include_walls: bool = False,
-                         rattler_max: int = 1, wall_distance: float | None = None, container=None) -> Result:
+                         rattler_max: int = 1, wall_distance: float | None = None, container=None,
+                         cutoff: float | None = None, cutoff_d50: float | None = None) -> Result:
     """Coordination numbers of selected frames (default first and last).
 
-    Options: ``source`` ("auto", "contacts", "geometry"), ``tolerance`` (relative gap for
-    geometric contacts), ``include_walls``, ``rattler_max`` (Z <= this is a rattler),
+    Options: ``source`` ("auto", "contacts", "geometry", "cutoff"), ``tolerance`` (relative gap for
+    geometric contacts), ``cutoff`` [m] or ``cutoff_d50`` (× d50): a fixed-cutoff coordination, every
+    centre within the cutoff counts (OVITO's coordination; giving either selects ``source="cutoff"``),
+    ``include_walls``, ``rattler_max`` (Z <= this is a rattler),
     ``wall_distance`` [m]: only particles whose centre is at least this far from the container
     boundary enter the statistics (``container`` as in :mod:`.containers`, default inferred).
 
     Tables: ``particles`` (frame, id, z), ``distribution`` (frame, z, count, p), ``summary``
     (frame, control, mean_z, mean_z_mechanical, rattler_fraction, n_particles, source).
     """
-    from .containers import make_container
-    from .plots import plot_coordination
     cname, cvals = control_values(frames, control)
+    if cutoff is None and cutoff_d50 is not None:
+        cutoff = float(cutoff_d50) * d50(frames.radius)
+    if cutoff is not None:
+        if source not in ("auto", "cutoff"):
+            raise ValueError(f"coordination: a cutoff was given but source is {source!r}; use source 'cutoff'")
+        source = "cutoff"
     if at is None and stride is None:
         ks = sorted({0, frames.n_frames - 1})
     else:
@@ -83,7 +94,7 @@ def analyze_coordination(frames, at=None, control: str | None = None, stride: in
     for k in ks:
         pos = frames.position[k]
         ok = present(pos)
-        i, j, used, _ = frame_contacts(frames, k, source, tolerance)
+        i, j, used, _ = frame_contacts(frames, k, source, tolerance, cutoff)
         z = coordination_from_pairs(len(pos), i, j, ok, include_walls)
         sel = ok.copy()
         if wall_distance is not None:
@@ -103,5 +114,6 @@ def analyze_coordination(frames, at=None, control: str | None = None, stride: in
     return Result("coordination", tables={"particles": pd.concat(parts, ignore_index=True),
                                           "distribution": pd.concat(dists, ignore_index=True), "summary": s},
                   scalars={"mean_z_last": float(s["mean_z"].iloc[-1]), "source": str(s["source"].iloc[-1])},
-                  options={"source": source, "tolerance": tolerance, "include_walls": include_walls},
+                  options={"source": source, "tolerance": tolerance, "include_walls": include_walls,
+                           "cutoff": cutoff},
                   plotter=plot_coordination)

@@ -15,32 +15,26 @@ strain ε_q = sqrt(2/3 ε_dev : ε_dev), which is the same under either sign con
 Green–Lagrange strain E = (ΛᵀΛ − I)/2 and its von Mises shear invariant (what OVITO's
 AtomicStrainModifier calls shear strain) are returned too.
 
-Everything is vectorised over pairs (np.bincount) and particles (batched 3×3 solves); there is
-no Python loop over particles.
+The neighbour sums run in compiled cell-list kernels (:mod:`._cells`, numba), the 3×3 solves
+are batched in numpy; there is no Python loop over particles.
 """
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 
+from ._cells import CellList, d2min_kernel, strains
 from ._common import Result, control_values, d50, frame_pairs, present
-from .neighbors import pairs_within
+from .containers import make_container
+from .plots import plot_d2min
 
 __all__ = ["d2min", "local_strain", "analyze_d2min"]
 
 _COMP = [(a, b) for a in range(3) for b in range(3)]
 
 
-def _sum_outer(idx, u, v, n):
-    """Σ over pairs with the same idx of u ⊗ v -> (n, 3, 3)."""
-    out = np.empty((n, 3, 3))
-    for a, b in _COMP:
-        out[:, a, b] = np.bincount(idx, weights=u[:, a] * v[:, b], minlength=n)
-    return out
-
-
 def d2min(reference: np.ndarray, current: np.ndarray, cutoff: float, min_neighbors: int = 3,
-          rcond: float = 1e-6) -> dict:
+          rcond: float = 1e-6, wall_distance: float | None = None, container=None) -> dict:
     """D²min and the best-fit affine tensor Λ for every particle (seed 001, eqs. 9-12).
 
     Parameters
@@ -50,6 +44,10 @@ def d2min(reference: np.ndarray, current: np.ndarray, cutoff: float, min_neighbo
     cutoff : neighbour cutoff [m] in the reference configuration (seed: 1.5 d50).
     min_neighbors : particles with fewer neighbours (or a neighbourhood that does not span 3-D,
         smallest/largest eigenvalue of Y below ``rcond``) get NaN.
+    wall_distance : [m] only particles whose reference centre is at least this far from the
+        container boundary get a value (the interior; near walls the neighbourhood is one-sided); all
+        particles still serve as neighbours. ``container`` as in :mod:`.containers` (default
+        inferred from the reference positions).
 
     Returns
     -------
@@ -62,24 +60,14 @@ def d2min(reference: np.ndarray, current: np.ndarray, cutoff: float, min_neighbo
         raise ValueError(f"reference and current must both be (N, 3), got {ref.shape} and {cur.shape}")
     n = len(ref)
     both = present(ref) & present(cur)
-    ref_m = np.where(both[:, None], ref, np.nan)
-    i, k = pairs_within(ref_m, cutoff, ordered=True)
-    mu0 = ref[k] - ref[i]
-    mu1 = cur[k] - cur[i]
-    nn = np.bincount(i, minlength=n)
-    X = _sum_outer(i, mu1, mu0, n)
-    Y = _sum_outer(i, mu0, mu0, n)
-    ev = np.linalg.eigvalsh(Y)
-    ok = both & (nn >= max(min_neighbors, 3)) & (ev[:, 0] > rcond * np.maximum(ev[:, 2], 1e-300))
-    Ys = np.where(ok[:, None, None], Y, np.eye(3))
-    # Λ = X Y⁻¹  <=>  Y Λᵀ = Xᵀ (Y symmetric)
-    F = np.swapaxes(np.linalg.solve(Ys, np.swapaxes(X, 1, 2)), 1, 2)
-    F[~ok] = np.nan
-    res = mu1 - np.einsum("pab,pb->pa", F[i], mu0)
-    d2 = np.bincount(i, weights=np.einsum("pa,pa->p", res, res), minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        d2 = d2 / nn
-    d2[~ok] = np.nan
+    if wall_distance is not None:
+        interior = np.zeros(n, bool)
+        box = make_container(container, np.where(both[:, None], ref, np.nan))
+        interior[both] = box.distance_to_boundary(ref[both]) >= float(wall_distance)
+    else:
+        interior = both
+    cells = CellList(np.where(both[:, None], ref, np.nan), cutoff)
+    d2, F, nn = d2min_kernel(cells, np.where(both[:, None], cur, 0.0), interior, max(min_neighbors, 3), rcond)
     out = {"d2min": d2, "F": F, "n_neighbors": np.where(both, nn, 0)}
     out.update(local_strain(F))
     return out
@@ -92,22 +80,13 @@ def local_strain(F: np.ndarray) -> dict:
     sqrt(2/3 ε_dev:ε_dev) (seed 001 after eq. 12), ``green`` E = (ΛᵀΛ − I)/2 and ``shear_vm``
     = sqrt(E_xy² + E_xz² + E_yz² + ((E_xx−E_yy)² + (E_yy−E_zz)² + (E_xx−E_zz)²)/6).
     """
-    F = np.asarray(F, float)
-    eye = np.eye(3)
-    eps = 0.5 * (F + np.swapaxes(F, -1, -2)) - eye
-    tr = np.trace(eps, axis1=-2, axis2=-1)
-    dev = eps - tr[..., None, None] / 3.0 * eye
-    eq = np.sqrt(2.0 / 3.0 * np.einsum("...ab,...ab->...", dev, dev))
-    E = 0.5 * (np.einsum("...ba,...bc->...ac", F, F) - eye)
-    vm = np.sqrt(E[..., 0, 1] ** 2 + E[..., 0, 2] ** 2 + E[..., 1, 2] ** 2
-                 + ((E[..., 0, 0] - E[..., 1, 1]) ** 2 + (E[..., 1, 1] - E[..., 2, 2]) ** 2
-                    + (E[..., 0, 0] - E[..., 2, 2]) ** 2) / 6.0)
-    return {"strain": eps, "eps_v": tr, "eps_q": eq, "green": E, "shear_vm": vm}
+    return strains(F)
 
 
 def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, pairs=None,
                   interval: float | None = None, start=None, control: str | None = None,
-                  stride: int = 1, min_neighbors: int = 3) -> Result:
+                  stride: int = 1, min_neighbors: int = 3, wall_distance: float | None = None,
+                  container=None) -> Result:
     """D²min, Λ and ε_q for frame pairs of a run (seed 001, eqs. 9-12).
 
     Options
@@ -116,6 +95,8 @@ def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, 
         minimum of g(r)).
     pairs / interval / start / control / stride : which (reference, current) frames, see
         :func:`orchestrator.analysis._common.frame_pairs` (seed: interval 0.01 axial strain).
+    wall_distance / container : only particles at least ``wall_distance`` [m] from the container
+        boundary get a value (see :func:`d2min`).
 
     Tables
     ------
@@ -124,14 +105,14 @@ def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, 
     ``summary``: per pair the mean/median/90th percentile of D²min and ε_q and the number of valid
     particles.
     """
-    from .plots import plot_d2min
     dd = d50(frames.radius)
     cut = float(cutoff) if cutoff is not None else cutoff_d50 * dd
     cname, cvals = control_values(frames, control)
     pos = frames.position
     rows, summ = [], []
     for k0, k1 in frame_pairs(frames, pairs, interval, start, control, stride):
-        r = d2min(pos[k0], pos[k1], cut, min_neighbors=min_neighbors)
+        r = d2min(pos[k0], pos[k1], cut, min_neighbors=min_neighbors, wall_distance=wall_distance,
+                  container=container)
         df = pd.DataFrame({
             "frame0": k0, "frame1": k1, "control0": cvals[k0], "control1": cvals[k1],
             "id": frames.ids, "radius": frames.radius,
@@ -151,5 +132,6 @@ def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, 
     return Result("d2min", tables={"particles": pd.concat(rows, ignore_index=True),
                                    "summary": pd.DataFrame(summ)},
                   scalars={"cutoff_m": cut, "d50_m": dd, "control": cname},
-                  options={"cutoff": cut, "pairs": pairs, "interval": interval, "control": cname},
+                  options={"cutoff": cut, "pairs": pairs, "interval": interval, "control": cname,
+                           "wall_distance": wall_distance},
                   plotter=plot_d2min)

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from ._common import Result, control_values, d50, frame_pairs, present
+from .plots import plot_displacements
 
 __all__ = ["incremental_displacements", "analyze_displacements"]
 
@@ -29,7 +30,6 @@ def analyze_displacements(frames, pairs=None, interval=None, start=None, control
     ``pdf`` (frame0, frame1, u_d50 bin centre, pdf), ``stats`` (per pair: mean, std, quartiles,
     5/95 % of |u| [m]).
     """
-    from .plots import plot_displacements
     dd = d50(frames.radius)
     cname, cvals = control_values(frames, control)
     pos = frames.position

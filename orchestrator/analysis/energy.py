@@ -28,6 +28,8 @@ import pandas as pd
 
 from ._common import Result, control_values, frame_indices, present
 from .neighbors import contacts_to_rows
+from ..units import to_si
+from .plots import plot_energy
 
 __all__ = ["kinetic_energy", "nonaffine_kinetic_energy", "hertz_normal_energy", "effective_modulus", "analyze_energy"]
 
@@ -94,7 +96,6 @@ def _material(frames, youngs_modulus, poisson_ratio):
     if "youngs_modulus" not in mat or "poisson_ratio" not in mat:
         raise ValueError(f"{frames.path}: energy needs the grains' Young's modulus and Poisson ratio; these frames "
                          "carry no case material (CT frames?): pass youngs_modulus [Pa] and poisson_ratio")
-    from ..units import to_si
     E = youngs_modulus if youngs_modulus is not None else to_si(mat["youngs_modulus"], "pressure")
     nu = poisson_ratio if poisson_ratio is not None else float(mat["poisson_ratio"])
     return float(E), float(nu)
@@ -114,7 +115,6 @@ def analyze_energy(frames, at=None, control: str | None = None, stride: int | No
     (of the selected frames that have contacts; a frame without contacts has ratio NaN), the same
     two for K'/U, ``limit``.
     """
-    from .plots import plot_energy
     if "velocity" not in frames.fields or not frames.contact_frames:
         raise ValueError(f"{frames.path}: energy needs velocities and contact forces in the frames "
                          f"(fields: {list(frames.fields)}, frames with contacts: {len(frames.contact_frames)}); "

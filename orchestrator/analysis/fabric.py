@@ -17,6 +17,7 @@ import pandas as pd
 
 from ._common import Result, control_values, frame_indices, present
 from .coordination import frame_contacts
+from .plots import plot_fabric
 
 __all__ = ["fabric_tensor", "anisotropy", "rose", "contact_vectors", "analyze_fabric"]
 
@@ -85,7 +86,6 @@ def analyze_fabric(frames, at=None, control: str | None = None, stride: int | No
     Tables: ``rose`` (frame, control, quantity ∈ {branch, normal, force}, psi, fraction, density,
     mean [N] for force), ``tensor`` (frame, control, phi_xx … phi_zz, eigenvalues, a_c, a_n, n_contacts).
     """
-    from .plots import plot_fabric
     if plane not in _PLANES:
         raise ValueError(f"plane must be one of {sorted(_PLANES)}, got {plane!r}")
     cname, cvals = control_values(frames, control)

@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import connected_components
 from ._common import Result, control_values, frame_indices
 from .fabric import contact_vectors
 from .stress import particle_stress
+from .plots import plot_forcechains
 
 __all__ = ["force_chains", "analyze_forcechains"]
 
@@ -68,7 +69,6 @@ def analyze_forcechains(frames, at=None, control: str | None = None, stride: int
     (frame, i, j ids, x_i..z_j [m], fn [N]), ``summary`` (frame, control, n_chains,
     fraction_in_chains, mean_size).
     """
-    from .plots import plot_forcechains
     cname, cvals = control_values(frames, control)
     if at is None and stride is None:
         ks = sorted({0, frames.n_frames - 1})

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from ._common import Result
+from .plots import plot_friction
 
 __all__ = ["mu_macro", "analyze_friction"]
 
@@ -57,7 +58,6 @@ def analyze_friction(frames, radius: float | None = None, torque_wall: str | Non
 
     Tables: ``friction`` (time, angle if known, torque [N m], normal_force [N], mu).
     """
-    from .plots import plot_friction
     tw = _pick(frames, "torque", torque_wall)
     fw = _pick(frames, "force", force_wall)
     wt, wf = frames.wall(tw), frames.wall(fw)

@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.figure import Figure
+from ._fits import erf_profile, fractal_dimension
 
 __all__ = ["plot_d2min", "plot_rdf", "plot_coordination", "plot_clusters", "plot_profiles", "plot_shearband",
            "plot_friction", "plot_displacements", "plot_stress", "plot_fabric", "plot_forcechains",
@@ -101,7 +102,6 @@ def plot_clusters(res, **kw):
         a2.loglog(ct.loc[m, "size"], ct.loc[m, "rg"] * MM, ".", ms=3, alpha=0.5)
         df = res.scalars.get("d_f")
         if df is not None and np.isfinite(df):
-            from .clusters import fractal_dimension
             f = fractal_dimension(ct["size"], ct["rg"], res.options.get("s_min_rg", 3))
             s = np.geomspace(max(res.options.get("s_min_rg", 3), 1), ct["size"].max(), 20)
             x, y = np.log(ct.loc[m & (ct["size"] >= res.options.get("s_min_rg", 3)), "size"]), np.log(ct.loc[m & (ct["size"] >= res.options.get("s_min_rg", 3)), "rg"])
@@ -131,7 +131,6 @@ def plot_profiles(res, **kw):
 
 def plot_shearband(res, **kw):
     """Profiles with erf fits at the last pair, z_sb and w_sb over the control, z_sb(r̃) at steady state (seed 000, Fig. 2)."""
-    from .shearband import erf_profile
     pr, ft, bd, st = (res.tables[k] for k in ("profiles", "fits", "band", "steady"))
     fig, (a1, a2, a3) = _fig(3, w=4.2)
     if len(pr):

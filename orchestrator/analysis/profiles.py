@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from ._common import Result, control_values, frame_indices, present, sphere_volume
+from .plots import plot_profiles
 
 __all__ = ["density_profile", "analyze_profiles"]
 
@@ -83,7 +84,6 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
     Tables: ``axial`` (frame, control, z, n, phi), ``radial`` (frame, control, r, n, phi),
     ``map`` (frame, control, r, z, n, phi).
     """
-    from .plots import plot_profiles
     cname, cvals = control_values(frames, control)
     pos_all = frames.position
     if at is None and stride is None:

@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 
 from ._common import Result, control_values, d50, frame_indices, present
 from .containers import make_container
+from .plots import plot_rdf
 
 __all__ = ["pair_counts", "rdf", "analyze_rdf"]
 
@@ -119,7 +120,6 @@ def analyze_rdf(frames, r_max: float | None = None, r_max_d50: float = 5.0, bins
     Tables: ``rdf`` with frame, control, r [m], r_d50 (r/d50), g, g_err, pairs. Scalars: position
     of the first peak and of the first minimum after it (in d50) for the last frame analysed.
     """
-    from .plots import plot_rdf
     dd = d50(frames.radius)
     rmax = float(r_max) if r_max is not None else r_max_d50 * dd
     if at is None and stride is None:

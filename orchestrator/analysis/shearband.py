@@ -22,14 +22,11 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special
 
+from ._fits import erf_profile
 from ._common import Result, control_values, frame_pairs, present
+from .plots import plot_shearband
 
 __all__ = ["erf_profile", "fit_erf_profile", "rotation_center", "angular_profiles", "analyze_shearband"]
-
-
-def erf_profile(z, z_sb, w_sb):
-    """Eq. 2 of seed 000: ½ + ½ erf((z − z_sb)/w_sb)."""
-    return 0.5 + 0.5 * special.erf((np.asarray(z, float) - z_sb) / w_sb)
 
 
 def fit_erf_profile(z, v, sigma=None) -> dict:
@@ -154,7 +151,6 @@ def analyze_shearband(frames, radii=None, dr: float | None = None, n_radii: int 
     and r̃: z_sb, z_sb_err, w_sb, w_sb_err, chi2_red, ok), ``band`` (per pair: r̃-averaged z_sb,
     w_sb with errors), ``steady`` (r_tilde, z_sb, z_sb_err, w_sb, w_sb_err, n_fits).
     """
-    from .plots import plot_shearband
     cname, cvals = control_values(frames, control)
     pos = frames.position
     prs = frame_pairs(frames, pairs, interval, None, control, stride)

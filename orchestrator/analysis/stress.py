@@ -12,12 +12,17 @@ over the states of a strain window (seed: Δε_a = 2.5e-3 over ε_a = 10 %..20 %
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from ._common import Result, control_values, frame_indices, present, sphere_volume
+from ._common import Result, control_values, d50, frame_indices, present, sphere_volume
 from .neighbors import contacts_to_rows
+from .d2min import d2min
+
+from .plots import plot_stress
 
 __all__ = ["deviatoric_q", "love_weber_stress", "volatility", "particle_stress", "analyze_stress"]
 
@@ -79,7 +84,6 @@ def volatility(q: np.ndarray) -> np.ndarray:
     R[~np.isfinite(R)] = np.nan
     cnt = np.sum(np.isfinite(R), axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        import warnings
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             V = np.nanstd(R, axis=0, ddof=1)
@@ -100,9 +104,6 @@ def analyze_stress(frames, window=None, interval: float | None = None, at=None, 
     ``summary`` (per state: mean and median q). Scalars: pearson_r, pearson_p, spearman_r,
     spearman_p, n.
     """
-    from .d2min import d2min
-    from ._common import d50
-    from .plots import plot_stress
     cname, cvals = control_values(frames, control)
     if at is not None:
         ks = frame_indices(frames, at, control)

@@ -18,18 +18,33 @@ import numpy as np
 import pandas as pd
 
 from ._common import Result
+from .plots import plot_triaxial
+from ..frames import Frames
 
 __all__ = ["running_mean", "local_slope", "friction_angle", "dilatancy_angle", "triaxial_curves", "analyze_triaxial",
            "plot_triaxial_runs"]
 
 
-def running_mean(x: np.ndarray, rows: int) -> np.ndarray:
-    """Centred running mean over ``rows`` samples (shorter windows at the ends)."""
+def running_mean(x: np.ndarray, rows: int, mode: str = "same") -> np.ndarray:
+    """Running mean over windows of ``rows`` consecutive samples — the one running mean of the
+    project (the triaxial curves and the scene's shear-stage summary both use it).
+
+    mode : ``"same"``: one value per sample, windows centred (an even window is centred half a row
+        early) and kept inside the series, so the first and last ``rows // 2`` values use the
+        window at the end (same length as ``x``); ``"valid"``: the mean of every full window,
+        ``len(x) - rows + 1`` values (the mean of all of ``x`` when it is shorter than one window).
+    """
     x = np.asarray(x, float)
     rows = max(int(rows), 1)
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    if mode == "valid":
+        if x.size < rows:
+            return np.array([np.mean(x)])
+        return (c[rows:] - c[:-rows]) / rows
+    if mode != "same":
+        raise ValueError(f"running_mean mode must be 'same' or 'valid', got {mode!r}")
     if rows == 1 or x.size == 0:
         return x.copy()
-    c = np.concatenate([[0.0], np.cumsum(x)])
     k = np.arange(x.size)
     lo = np.clip(k - rows // 2, 0, x.size)
     hi = np.clip(lo + rows, 0, x.size)
@@ -126,7 +141,6 @@ def analyze_triaxial(frames, smoothing_rows: int = 10, residual_from: float = 0.
             "final_volumetric_strain": float(c["volumetric_strain"].iloc[-1]),
             "max_contraction": float(c["volumetric_strain_smoothed"].max()),
             "smoothing_rows": int(smoothing_rows)}
-    from .plots import plot_triaxial
     return Result("triaxial", tables={"curves": c}, scalars=scal,
                   options={"smoothing_rows": smoothing_rows, "residual_from": residual_from,
                            "dilatancy_window": dilatancy_window, "wall": wall},
@@ -136,8 +150,6 @@ def analyze_triaxial(frames, smoothing_rows: int = 10, residual_from: float = 0.
 def plot_triaxial_runs(runs, labels=None, smoothing_rows: int = 10):
     """Overlay the curves of several runs (run directories, frames files or Frames): σ1/σ3 and ε_v
     against ε_a. Returns a matplotlib Figure (e.g. LIGGGHTS against YADE)."""
-    from ..frames import Frames
-    from .plots import plot_triaxial
     results = [analyze_triaxial(r if isinstance(r, Frames) else Frames(r), smoothing_rows) for r in runs]
     labels = labels or [str(getattr(r, "path", r)) for r in runs]
     return plot_triaxial(results[0], others=list(zip(labels[1:], results[1:])), label=labels[0])

@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 from .io import Scan
 
 __all__ = ["pack_spheres", "render_phase", "acquire", "render_scan", "render_sequence",
-           "random_sh_grains", "twist", "scans_from_frames", "Grain"]
+           "random_sh_grains", "twist", "separate_contacts", "contact_packing", "score_contacts", "scans_from_frames", "Grain"]
 
 
 # ------------------------------------------------------------------------------------- packings
@@ -103,6 +103,50 @@ def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=3000, tol=1e
             return x
     raise RuntimeError(f"pack_spheres: largest overlap still {worst / r.mean():.3g} mean radii after "
                        f"{iterations} iterations; use fewer or smaller grains")
+
+
+def separate_contacts(centres, radii, min_gap, overlap=0.005, iterations=2000, box=None):
+    """Make every near pair of a packing either a contact or clearly apart, as a DEM packing with its
+    contact list: pairs whose surfaces are closer than ``min_gap / 2`` [m] when first seen become
+    contacts, kept touching with an overlap of at most ``2 overlap`` times the sum of their radii
+    (a DEM contact: Hertz overlaps are ~0.1-1 % of a diameter); the other pairs are kept at least
+    ``min_gap`` apart (a gap that the scan should resolve). Each violated bound moves both spheres by
+    half the violation along the branch vector; sweeps repeat until every bound holds.
+
+    box : ((x0, y0, z0), (x1, y1, z1)) [m] keeps the spheres inside.
+    Returns (centres (N, 3) [m], contacts (M, 2) index pairs i < j).
+    """
+    x = np.array(centres, dtype=float)
+    r = np.asarray(radii, dtype=float)
+    n = len(x)
+    rmax = r.max()
+    contact = set()            # decided once, when a pair is first seen near (no flip-flopping)
+    apart = set()
+    for _ in range(iterations):
+        p = cKDTree(x).query_pairs(2 * rmax + min_gap, output_type="ndarray")
+        i, j = p[:, 0], p[:, 1]
+        d = x[j] - x[i]
+        dist = np.linalg.norm(d, axis=1)
+        h = dist - r[i] - r[j]
+        key = (i * n + j).tolist()
+        for k in np.flatnonzero(h < min_gap).tolist():
+            if key[k] not in contact and key[k] not in apart:
+                (contact if h[k] < 0.5 * min_gap else apart).add(key[k])
+        is_c = np.fromiter((k in contact for k in key), bool, len(key))
+        s = r[i] + r[j]
+        # contacts: overlap between overlap/4 and 2 overlap (a Hertz overlap range); others: the gap
+        target = np.where(is_c, np.clip(h, -2 * overlap * s, 0.0), np.maximum(h, min_gap))
+        bad = np.abs(target - h) > 0.02 * min_gap
+        if not bad.any():
+            return x, p[is_c]
+        i, j, d, dist, corr = i[bad], j[bad], d[bad], dist[bad], (target - h)[bad]
+        corr += np.sign(corr) * 0.01 * min_gap              # aim inside the bound
+        push = d / dist[:, None] * (0.5 * corr)[:, None]
+        for k in range(3):
+            x[:, k] += np.bincount(j, push[:, k], n) - np.bincount(i, push[:, k], n)
+        if box is not None:
+            x = np.clip(x, np.asarray(box[0]) + r[:, None], np.asarray(box[1]) - r[:, None])
+    raise RuntimeError(f"separate_contacts: pairs still between contact and {min_gap:g} m after {iterations} sweeps")
 
 
 def twist(position, centre_xy, angle):
@@ -363,3 +407,56 @@ def scans_from_frames(frames, voxel_size, margin=None, frame_indices=None, progr
     scans = render_sequence(shape, voxel_size, pos, fr.radius, origin=lo, times=fr.time[idx],
                             controls=controls, progress=progress, **kw)
     return scans, fr.ids
+
+
+def contact_packing(shape, voxel_size, radius_range, min_gap=0.5, fill=0.45, seed=0, margin=2):
+    """A packing with its contact list, for testing contact detection: spheres with radii uniform in
+    ``radius_range`` [voxels] packed in a box of ``shape`` voxels (``margin`` voxels from the faces) at
+    volume fraction ``fill``, then :func:`separate_contacts` with ``min_gap`` [voxels].
+    Returns (centres (N, 3) [m], radii (N,) [m], contacts (M, 2) index pairs)."""
+    rng = np.random.default_rng(seed)
+    inner = np.asarray(shape, float) - 2 * margin
+    n = int(fill * np.prod(inner) / (4 / 3 * np.pi * np.mean(radius_range) ** 3))
+    r = rng.uniform(*radius_range, n) * voxel_size
+    box = ((margin * voxel_size,) * 3, tuple((np.asarray(shape[::-1], float) - margin) * voxel_size))
+    c = pack_spheres(r, box=box, seed=seed + 1)
+    c, con = separate_contacts(c, r, min_gap * voxel_size, box=box)
+    return c, r, con
+
+
+def score_contacts(seg, centres, radii, contacts, refined=None) -> dict:
+    """Precision and recall of detected contacts against a known contact list.
+
+    seg : :class:`~.segment.Segmentation` of a scan of the spheres ``centres`` (N, 3) [m], ``radii``
+    (N,) [m]; contacts : (M, 2) true contact index pairs. Each label is matched to the nearest true
+    centre (within half its radius, otherwise the label's contacts count as false).
+    Returns precision, recall, mean coordination number (over grains found) of the truth, of the
+    candidates (face-adjacent labels) and of the refined contacts, and the median / 90th percentile
+    normal error [deg] of the refined true contacts (PCA normal against the true branch vector)."""
+    g = seg.grains
+    d, k = cKDTree(centres).query(g[["x", "y", "z"]].to_numpy())
+    ok = d < 0.5 * radii[k]
+    lab2 = dict(zip(g["label"].to_numpy()[ok], k[ok]))
+    cand = seg.contacts(refine=False) if refined is None else refined
+    ti = np.array([lab2.get(a, -1) for a in cand["i"]], np.int64)
+    tj = np.array([lab2.get(b, -2) for b in cand["j"]], np.int64)
+    n = len(centres)
+    truth = set((np.minimum(contacts[:, 0], contacts[:, 1]) * n + np.maximum(contacts[:, 0], contacts[:, 1])).tolist())
+    key = np.minimum(ti, tj) * n + np.maximum(ti, tj)
+    hit = np.array([(a >= 0 and b >= 0 and kk in truth) for a, b, kk in zip(ti, tj, key.tolist())], bool)
+    det = cand["touching"].to_numpy(bool)
+    tp = int((hit & det).sum())
+    br = centres[tj[hit & det]] - centres[ti[hit & det]]
+    br /= np.linalg.norm(br, axis=1)[:, None]
+    nrm = cand.loc[hit & det, ["nx", "ny", "nz"]].to_numpy()
+    err = np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", br, nrm)), 0, 1)))
+    found = np.unique(k[ok])
+    inside = np.isin(contacts, found).all(axis=1)
+    n_found = max(len(found), 1)
+    return {"true": len(truth), "candidates": len(cand), "detected": int(det.sum()),
+            "precision": tp / max(int(det.sum()), 1), "recall": tp / max(len(truth), 1),
+            "recall_candidates": int(hit.sum()) / max(len(truth), 1),
+            "z_true": 2 * int(inside.sum()) / n_found, "z_candidates": 2 * len(cand) / n_found,
+            "z_refined": 2 * int(det.sum()) / n_found,
+            "normal_err_median_deg": float(np.median(err)) if err.size else float("nan"),
+            "normal_err_p90_deg": float(np.percentile(err, 90)) if err.size else float("nan")}

@@ -91,28 +91,59 @@ def link(pos_a, pos_b, max_disp: float, predicted=None) -> Links:
     ia_ok, ib_ok = np.nonzero(oka)[0], np.nonzero(okb)[0]
     if len(ia_ok) == 0 or len(ib_ok) == 0:
         return _links_from_pairs(na, nb, [], [], [], "displacement", {"max_disp": max_disp})
-    ta, tb = cKDTree(pa[ia_ok]), cKDTree(pb[ib_ok])
-    D = ta.sparse_distance_matrix(tb, max_disp, output_type="coo_matrix")
-    i, j, d = D.row, D.col, D.data
+    i, j, d = _candidates(pa[ia_ok], pb[ib_ok], max_disp)
     n1, n2 = len(ia_ok), len(ib_ok)
     if len(i) == 0:
         return _links_from_pairs(na, nb, [], [], [], "displacement", {"max_disp": max_disp})
-    # augmented graph: rows = A (n1) + dummies of B (n2); cols = B (n2) + dummies of A (n1).
-    # every edge gets +1 so that no weight is zero (sparse zeros are missing edges); a full matching
-    # always has n1 + n2 edges, so the offset does not change the optimum.
-    s2 = max_disp ** 2
-    w = 1.0 + (d * d) / s2
-    half = 1.5
-    rows = np.concatenate([i, np.arange(n1), n1 + np.arange(n2), n1 + j])
-    cols = np.concatenate([j, n2 + np.arange(n1), np.arange(n2), n2 + i])
-    wts = np.concatenate([w, np.full(n1, half), np.full(n2, half), np.ones(len(i))])
-    G = sparse.csr_matrix((wts, (rows, cols)), shape=(n1 + n2, n1 + n2))
-    rr, cc = min_weight_full_bipartite_matching(G)
-    real = (rr < n1) & (cc < n2)
-    ia, ib = rr[real], cc[real]
+    # A pair that is each other's only candidate is linked outright: linking costs d^2 <= max_disp^2,
+    # leaving both unlinked 2 * max_disp^2 / 2. Only the other components need the matching.
+    deg_a = np.bincount(i, minlength=n1)
+    deg_b = np.bincount(j, minlength=n2)
+    alone = (deg_a[i] == 1) & (deg_b[j] == 1)
+    la, lb = [i[alone]], [j[alone]]
+    i, j, d = i[~alone], j[~alone], d[~alone]
+    if len(i):
+        ua, i = np.unique(i, return_inverse=True)
+        ub, j = np.unique(j, return_inverse=True)
+        m1, m2 = len(ua), len(ub)
+        # augmented graph: rows = A (m1) + dummies of B (m2); cols = B (m2) + dummies of A (m1).
+        # every edge gets +1 so that no weight is zero (sparse zeros are missing edges); a full
+        # matching always has m1 + m2 edges, so the offset does not change the optimum.
+        w = 1.0 + (d * d) / max_disp ** 2
+        half = 1.5
+        rows = np.concatenate([i, np.arange(m1), m1 + np.arange(m2), m1 + j])
+        cols = np.concatenate([j, m2 + np.arange(m1), np.arange(m2), m2 + i])
+        wts = np.concatenate([w, np.full(m1, half), np.full(m2, half), np.ones(len(i))])
+        G = sparse.csr_matrix((wts, (rows, cols)), shape=(m1 + m2, m1 + m2))
+        rr, cc = min_weight_full_bipartite_matching(G)
+        real = (rr < m1) & (cc < m2)
+        la.append(ua[rr[real]])
+        lb.append(ub[cc[real]])
+    ia, ib = np.concatenate(la), np.concatenate(lb)
     disp = np.linalg.norm(pa[ia_ok[ia]] - pb[ib_ok[ib]], axis=1)
     return _links_from_pairs(na, nb, ia_ok[ia], ib_ok[ib], disp, "displacement",
-                             {"max_disp": max_disp, "candidates": int(len(i))})
+                             {"max_disp": max_disp, "candidates": int(len(i) + alone.sum())})
+
+
+def _candidates(pa, pb, max_disp, k=2):
+    """Every pair (i, j, distance) with ``|pa[i] - pb[j]| <= max_disp``: the k nearest points of B for
+    each point of A from one k-d tree query, k doubled for the rows whose k-th neighbour is still
+    within reach (few: at the usual steps most grains have one candidate)."""
+    tree = cKDTree(pb)
+    rows = np.arange(len(pa))
+    out_i, out_j, out_d = [], [], []
+    while len(rows):
+        k = min(k, len(pb))
+        dist, idx = tree.query(pa[rows], k=k, distance_upper_bound=max_disp)
+        dist, idx = dist.reshape(len(rows), k), idx.reshape(len(rows), k)
+        full = np.isfinite(dist[:, -1]) & (k < len(pb))
+        keep = np.isfinite(dist) & ~full[:, None]
+        out_i.append(np.broadcast_to(rows[:, None], dist.shape)[keep])
+        out_j.append(idx[keep])
+        out_d.append(dist[keep])
+        rows = rows[full]
+        k *= 2
+    return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_d)
 
 
 # -------------------------------------------------------------------- (b) image-based rotation

@@ -34,6 +34,21 @@ def test_running_mean_is_exact_on_lines_and_keeps_length():
     assert m.shape == x.shape
     assert m[10:-10] == pytest.approx(x[10:-10] - 0.5)       # an even window is centred half a row early
     assert running_mean(x, 1) == pytest.approx(x)
+    # the ends use the first / last full window
+    assert m[:5] == pytest.approx(np.full(5, 4.5)) and m[-5:] == pytest.approx(np.full(5, 44.5))
+
+
+def test_running_mean_valid_mode_is_every_full_window():
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=37)
+    v = running_mean(x, 5, mode="valid")
+    assert v == pytest.approx(np.convolve(x, np.ones(5) / 5, mode="valid"), abs=1e-13)
+    # the centred values are the valid windows, shifted by rows // 2, in the interior
+    assert running_mean(x, 5)[2:-2] == pytest.approx(v, abs=1e-13)
+    assert running_mean(np.arange(5.0), 2, mode="valid") == pytest.approx([0.5, 1.5, 2.5, 3.5])
+    assert running_mean(x[:3], 5, mode="valid") == pytest.approx([np.mean(x[:3])])
+    with pytest.raises(ValueError, match="mode"):
+        running_mean(x, 5, mode="full")
 
 
 def test_analyze_triaxial_peak_and_residual(tmp_path):
