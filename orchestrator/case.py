@@ -155,6 +155,10 @@ class EngineOptions(Strict):
     threads: int = Field(1, ge=1)
     timeout: Time = "3600 s"
     progress: bool = True
+    scheduler: str | None = Field(
+        None, description="Dask scheduler address (tcp://host:8786; dask-jobqueue's SLURMCluster/PBSCluster "
+                          "give one): the whole run, with its MPI ranks or threads, goes to one worker of that "
+                          "cluster; runs_root must be on a filesystem the worker shares")
 
 
 class Output(Strict):

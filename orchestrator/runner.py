@@ -144,7 +144,11 @@ def prepare(case: Case, engine_name: str, run_dir: Path, params: dict | None = N
 
 def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False, dry_run: bool = False,
              progress: bool | None = None, analyze: bool = True) -> RunOutcome:
-    """Render, run, parse (and analyse) one case on one engine."""
+    """Render, run, parse (and analyse) one case on one engine. With
+    ``case.engine_options.scheduler`` set, the run goes to a Dask worker (:func:`run_on_cluster`)."""
+    if case.engine_options.scheduler and not dry_run:
+        return run_on_cluster(case, engine_name, case.engine_options.scheduler, runs_root=runs_root, force=force,
+                              analyze=analyze)
     eng = get_engine(engine_name)
     if not eng.available():
         raise EngineError(f"{engine_name} is not installed (no '{eng.executable}' on PATH); "
@@ -385,3 +389,36 @@ def run_case_analyses(case: Case, run_dir: Path) -> dict:
     except ImportError as exc:  # analysis package not available
         return {"error": f"analysis unavailable: {exc}"}
     return run_analyses(Frames(run_dir / "frames.h5"), case.analysis, run_dir / "analysis")
+
+
+def _run_resolved(data: dict, source: str, engine_name: str, runs_root: str, force: bool, analyze: bool) -> dict:
+    """Worker side of :func:`run_on_cluster`: rebuild the case from its resolved data (without the
+    scheduler, so the worker runs it itself) and run it. Returns the outcome as plain data."""
+    from .case import case_from_dict
+    data = dict(data, engine_options=dict(data.get("engine_options") or {}, scheduler=None))
+    case = case_from_dict(data, source=source)
+    out = run_case(case, engine_name, runs_root=runs_root, force=force, progress=False, analyze=analyze)
+    return {"run_dir": str(out.run_dir), "status": out.status, "summary": out.summary, "reused": out.reused,
+            "worker_pid": os.getpid()}
+
+
+def run_on_cluster(case: Case, engine_name: str, scheduler, runs_root="runs", force: bool = False,
+                   analyze: bool = True) -> RunOutcome:
+    """Run one case on one engine on a worker of a Dask cluster (``scheduler``: an address, a
+    ``distributed.Client`` or a cluster object such as LocalCluster or dask-jobqueue's
+    SLURMCluster). The worker needs the engines and this package installed, and ``runs_root``
+    must be a path it shares with this process; the run's MPI ranks or threads are its own."""
+    from distributed import Client
+    own = not isinstance(scheduler, Client)
+    client = Client(scheduler) if own else scheduler
+    try:
+        fut = client.submit(_run_resolved, case.resolved(), str(case.source), engine_name,
+                            str(Path(runs_root).resolve()), force, analyze, pure=False)
+        res = fut.result()
+    finally:
+        if own:
+            client.close()
+    out = RunOutcome(Path(res["run_dir"]), res["status"], res["summary"], res["reused"])
+    out.summary.setdefault("ran_on", {"scheduler": str(getattr(client, "scheduler", scheduler)),
+                                      "worker_pid": res["worker_pid"]})
+    return out
