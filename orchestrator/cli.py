@@ -18,16 +18,9 @@ def _console():
     return Console(soft_wrap=True)          # no hard wraps: output stays greppable in logs
 
 
-def _fmt_s(seconds: float) -> str:
-    if seconds < 1:
-        return f"{seconds * 1000:.0f} ms"
-    if seconds < 120:
-        return f"{seconds:.1f} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.1f} min"
-    if seconds < 172800:
-        return f"{seconds / 3600:.1f} h"
-    return f"{seconds / 86400:.1f} days"
+def _num(x) -> str:
+    """A figure for a message (the engine's value or limit; NaN or missing shown as such)."""
+    return f"{x:.6g}" if isinstance(x, (int, float)) else str(x)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -72,27 +65,26 @@ def cmd_run(args) -> int:
         out = run_case(case, eng, runs_root=args.runs, force=args.force, dry_run=args.dry_run,
                        progress=None if not args.quiet else False)
         s = out.summary
-        if True:
-            wt = s.get("wall_time", {})
-            tag = "reused" if out.reused else s["status"]
-            if s["status"] == "unstable":
-                status = 1
-                u = s.get("unstable") or {}
-                con.print(f"[red]{eng}: unstable[/red] {out.run_dir}: {u.get('meaning', u.get('figure'))}: "
-                          f"{u.get('figure')} = {u.get('value'):.6g} against the limit {u.get('limit'):.6g} at step "
-                          f"{u.get('step')}; lower timestep.fraction (the stability report is in summary.json) and "
-                          "run again")
-                continue
-            con.print(f"[green]{eng}[/green]: {tag} {out.run_dir} — engine {wt.get('engine', 0):.1f} s, "
-                      f"total {wt.get('total', 0):.1f} s")
-            r = s.get("resumed_from")
-            if r and not out.reused:
-                at = f" (step {r['step']})" if r.get("step") is not None else ""
-                con.print(f"  resumed from {r.get('restart_file') or r.get('checkpoint')}{at}")
-            if s.get("status") == "complete" and not args.no_report:
-                _closing_results(out.run_dir, con)
+        wt = s.get("wall_time", {})
+        tag = "reused" if out.reused else s["status"]
+        if s["status"] == "unstable":
+            status = 1
+            u = s.get("unstable") or {}
+            con.print(f"[red]{eng}: unstable[/red] {out.run_dir}: {u.get('meaning', u.get('figure'))}: "
+                      f"{u.get('figure')} = {_num(u.get('value'))} against the limit {_num(u.get('limit'))} at step "
+                      f"{u.get('step')}; lower timestep.fraction (the stability report is in summary.json) and "
+                      "run again")
+            continue
+        con.print(f"[green]{eng}[/green]: {tag} {out.run_dir} — engine {wt.get('engine', 0):.1f} s, "
+                  f"total {wt.get('total', 0):.1f} s")
+        r = s.get("resumed_from")
+        if r and not out.reused:
+            at = f" (step {r['step']})" if r.get("step") is not None else ""
+            con.print(f"  resumed from {r.get('restart_file') or r.get('checkpoint')}{at}")
         for sub in s.get("substitutions", []):
             con.print(f"  substitution: {sub['feature']} -> {sub['mechanism']}: {sub['note']}")
+        if s.get("status") == "complete" and not args.no_report:
+            _closing_results(out.run_dir, con)
     return status
 
 

@@ -224,7 +224,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     t0 = time.perf_counter()
     params, subs = prepare(case, engine_name, run_dir, params)
     prior = read_summary(run_dir) or {}
-    resume = None if dry_run or prior.get("status") not in ("running", "failed") else eng.resume_state(run_dir)
+    resume = None if dry_run or prior.get("status") not in ("running", "failed", "interrupted") else eng.resume_state(run_dir)
     if not dry_run:
         resume = _scene_resume(case, engine_name, run_dir, resume)
     if resume and hasattr(eng, "prepare_resume"):

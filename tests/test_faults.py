@@ -63,13 +63,19 @@ def case_file(tmp_path: Path, name: str, body: str, base: Path = SMOKE) -> Path:
     return p
 
 
-def shared_dir(tmp_path: Path) -> Path:
-    """A directory an unprivileged user may write into (for the permission faults)."""
-    d = tmp_path / "shared"
-    d.mkdir()
-    for q in (tmp_path, d):
-        q.chmod(0o777)
-    return d
+@pytest.fixture
+def shared_dir():
+    """A directory an unprivileged user may reach and write into (for the permission faults; pytest's
+    own tmp_path lies under a 0700 directory of the user running the tests)."""
+    import shutil
+    import tempfile
+    d = Path(tempfile.mkdtemp(prefix="faults-", dir="/tmp"))
+    d.chmod(0o777)
+    yield d
+    for q in d.rglob("*"):
+        if q.is_dir():
+            q.chmod(0o755)
+    shutil.rmtree(d, ignore_errors=True)
 
 
 def synthetic_run(run_dir: Path, scene_kind: str = "shear_cell", n_frames: int = 4) -> Path:
@@ -169,20 +175,22 @@ def test_analyze_on_a_missing_path(tmp_path):
     one_message(cli("analyze", tmp_path / "nope"), 2, str(tmp_path / "nope"), "no such run directory")
 
 
-def test_analyze_in_a_read_only_directory(tmp_path):
-    run = synthetic_run(shared_dir(tmp_path) / "run")
+def test_analyze_in_a_read_only_directory(shared_dir):
+    run = synthetic_run(shared_dir / "run")
+    for f in run.iterdir():
+        f.chmod(0o644)
     run.chmod(0o555)
-    out = cli("analyze", run, as_nobody=True, env={"MPLCONFIGDIR": str(tmp_path / "shared")})
+    out = cli("analyze", run, as_nobody=True, env={"MPLCONFIGDIR": str(shared_dir)})
     one_message(out, 2, str(run), "permission denied", "--out")
 
 
 @pytest.mark.engine
-def test_read_only_runs_directory(tmp_path, engines_installed):
-    runs = shared_dir(tmp_path) / "runs"
+def test_read_only_runs_directory(shared_dir, engines_installed):
+    runs = shared_dir / "runs"
     runs.mkdir()
     runs.chmod(0o555)
     out = cli("run", IMPACT, "--engine", "liggghts", "--runs", runs, as_nobody=True,
-              env={"MPLCONFIGDIR": str(tmp_path / "shared")})
+              env={"MPLCONFIGDIR": str(shared_dir)})
     one_message(out, 2, str(runs), "permission denied")
 
 

@@ -90,8 +90,9 @@ NOT_YET = {
     ("liggghts", "plane_shear"): "11.5 r_min after a SIGINT and a resume from step 14080 (frames, wall rows and "
                                  "the frames before the resume are exact); cause not yet found (the top wall's "
                                  "variable servo is not a fix mesh/surface/stress/servo)",
-    ("yade", "shear_cell"): "the resumed script failed and the run fell back to a fresh start (complete, "
-                            "resumed_from None); templates/yade/shear_cell.py.j2's resume path needs a look",
+    ("yade", "shear_cell"): "one try: the resumed script failed and the run fell back to a fresh start; a second "
+                            "(SIGKILL 5 s after the first checkpoint): frames once, frames before it exact, after it "
+                            "4.65-4.80 r_min, and one wall row lost (2880 of 2881); cause not found yet",
 }
 
 
