@@ -378,6 +378,47 @@ class Frames:
         self._cache: dict = {}
         self._index = {int(i): k for k, i in enumerate(self.ids)}
 
+    @classmethod
+    def from_arrays(cls, position, radius, time=None, ids=None, controls: Mapping | None = None,
+                    meta: Mapping | None = None, **fields) -> "Frames":
+        """Frames held in memory, built from arrays without writing a file (e.g. for the array-level
+        analyses in a notebook). ``position`` (T, N, 3) [m] (or (N, 3) for one frame; NaN rows =
+        absent), ``radius`` (N,) [m], ``time`` (T,) [s] (default 0, 1, ...), ``ids`` (N,) (default
+        1..N), ``controls`` name -> (T,) arrays, other per-particle fields (T, N, ...) by name.
+        Everything that reads the file (single :class:`Frame` objects, contacts, wall series) is
+        not available on such a set: it has no contacts and no walls."""
+        pos = np.asarray(position, dtype=float)
+        if pos.ndim == 2:
+            pos = pos[None]
+        if pos.ndim != 3 or pos.shape[2] != 3:
+            raise ValueError(f"Frames.from_arrays: position must be (T, N, 3) or (N, 3) [m], got {pos.shape}")
+        T, N = pos.shape[:2]
+        self = cls.__new__(cls)
+        self.path = "<arrays>"
+        self.ids = np.arange(1, N + 1, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
+        self.radius = np.broadcast_to(np.asarray(radius, dtype=float), (N,)).copy()
+        self.mass = None
+        self.shape = None
+        self.time = np.arange(T, dtype=float) if time is None else np.asarray(time, dtype=float)
+        self.step = np.arange(T, dtype=np.int64)
+        self._cache = {"position": pos, **{k: np.asarray(v) for k, v in fields.items() if v is not None}}
+        unknown = [k for k in self._cache if k not in PER_PARTICLE_FIELDS]
+        if unknown:
+            raise ValueError(f"Frames.from_arrays: unknown per-particle fields {unknown}; known: {list(PER_PARTICLE_FIELDS)}")
+        for k, v in self._cache.items():
+            if v.shape[:2] != (T, N):
+                raise ValueError(f"Frames.from_arrays: field {k!r} has shape {v.shape}, expected ({T}, {N}, ...)")
+        if len(self.ids) != N or len(self.time) != T:
+            raise ValueError(f"Frames.from_arrays: {len(self.ids)} ids and {len(self.time)} times for "
+                             f"{T} frames x {N} particles")
+        self.fields = tuple(f for f in PER_PARTICLE_FIELDS if f in self._cache)
+        self.controls = {k: np.asarray(v, dtype=float) for k, v in (controls or {}).items()}
+        self.meta = dict(meta or {})
+        self.contact_frames = []
+        self.wall_names = []
+        self._index = {int(i): k for k, i in enumerate(self.ids)}
+        return self
+
     def __repr__(self):
         return (f"Frames({str(self.path)!r}: {self.n_frames} frames x {self.n_particles} particles, "
                 f"fields={list(self.fields)}, controls={list(self.controls)}, walls={self.wall_names})")

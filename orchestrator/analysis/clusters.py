@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy import optimize, special
+
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 

@@ -38,7 +38,7 @@ def coordination_from_pairs(n: int, i: np.ndarray, j: np.ndarray, mask: np.ndarr
 def neighbor_counts(position: np.ndarray, cutoff: float) -> np.ndarray:
     """Number of other centres within ``cutoff`` [m] of each centre (OVITO's "Coordination");
     NaN for absent rows. Compiled cell-list count (:mod:`._cells`)."""
-    c = count_within(CellList(position, cutoff)).astype(float)
+    c = count_within(CellList(position, cutoff, reach=1)).astype(float)
     c[c < 0] = np.nan
     return c
 

@@ -20,7 +20,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
-from scipy import optimize, special
+from scipy import optimize
 
 from ._fits import erf_profile
 from ._common import Result, control_values, frame_pairs, present

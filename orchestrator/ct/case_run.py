@@ -12,6 +12,8 @@ import hashlib
 import json
 from pathlib import Path
 
+from .commands import segment_main, track_main
+
 
 class CTCaseError(ValueError):
     pass
@@ -40,7 +42,6 @@ def ct_run_dir(case, runs_root="runs") -> Path:
 
 def run_ct_case(case, runs_root="runs", force: bool = False) -> Path:
     """Segment and track the case's scan series; return the frames.h5 path (reused if complete)."""
-    from .cli import segment_main, track_main
     if case.ct is None:
         raise CTCaseError(f"{case.source}: the case has no ct: section (scans to segment and track)")
     run_dir = ct_run_dir(case, runs_root)
