@@ -5,15 +5,18 @@ from .base import Engine, EngineError, Substitution, UnsupportedFeature
 
 
 def get_engine(name: str) -> Engine:
-    """The adapter for ``name`` ('liggghts' or 'yade')."""
+    """The adapter for ``name`` (one of :data:`ENGINE_NAMES`)."""
     if name == "liggghts":
         from .liggghts import Liggghts
         return Liggghts()
     if name == "yade":
         from .yade import Yade
         return Yade()
-    raise KeyError(f"unknown engine {name!r}; known: liggghts, yade")
+    if name == "lammps":
+        from .lammps import Lammps
+        return Lammps()
+    raise KeyError(f"unknown engine {name!r}; known: {', '.join(ENGINE_NAMES)}")
 
 
-ENGINE_NAMES = ("liggghts", "yade")
+ENGINE_NAMES = ("liggghts", "yade", "lammps")
 __all__ = ["Engine", "EngineError", "Substitution", "UnsupportedFeature", "get_engine", "ENGINE_NAMES"]

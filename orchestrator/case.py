@@ -17,7 +17,9 @@ from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_valid
 
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
 
-ENGINES = ("liggghts", "yade")
+ENGINES = ("liggghts", "yade", "lammps")
+#: the engines a case runs on when it names none (LAMMPS runs the scenes it has decks for: ask for it)
+DEFAULT_ENGINES = ("liggghts", "yade")
 
 
 class CaseError(ValueError):
@@ -229,7 +231,7 @@ class Case(Strict):
     """A simulation case. Everything in SI after loading."""
     name: str
     description: str = ""
-    engines: list[Literal["liggghts", "yade"]] = Field(default_factory=lambda: list(ENGINES))
+    engines: list[Literal["liggghts", "yade", "lammps"]] = Field(default_factory=lambda: list(DEFAULT_ENGINES))
     seed: int = 12345
     material: Material
     wall: Material | RigidWall = Field(default_factory=RigidWall)

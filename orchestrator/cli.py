@@ -75,9 +75,9 @@ def cmd_engines(args) -> int:
     t = Table(title="DEM engines")
     t.add_column("feature")
     engs = [get_engine(n) for n in ENGINE_NAMES]
-    for e in engs:
-        ver = e.version() if e.available() else "not installed"
-        t.add_column(f"{e.name} ({ver})")
+    for e in engs:          # versions on their own lines: a table cell would wrap them
+        con.print(f"{e.name}: {e.version() if e.available() else 'not installed'}")
+        t.add_column(e.name)
     for f in FEATURES:
         row = [f]
         for e in engs:
@@ -96,7 +96,8 @@ def cmd_verify(args) -> int:
     from rich.table import Table
     from .verify import run_verification
     from .verify import verification_cases
-    engines = ["liggghts", "yade"] if args.engine == "all" else [args.engine]
+    from engines import ENGINE_NAMES
+    engines = list(ENGINE_NAMES) if args.engine == "all" else [args.engine]
     cases = [p for p in verification_cases() if not args.case or any(c in p.stem for c in args.case)]
     if not cases:
         print(f"error: no verification case matches {args.case}", file=sys.stderr)
@@ -163,7 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="render, run and parse a case on one or both engines")
     r.add_argument("case", help="case YAML file")
-    r.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all",
+    r.add_argument("--engine", choices=["liggghts", "yade", "lammps", "all"], default="all",
                    help="engine to run (default: all engines the case lists)")
     r.add_argument("--force", action="store_true", help="redo a complete run from scratch")
     r.add_argument("--dry-run", action="store_true", help="render decks and estimate run time only")
@@ -179,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_engines)
 
     vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")
-    vf.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    vf.add_argument("--engine", choices=["liggghts", "yade", "lammps", "all"], default="all")
     vf.add_argument("--runs", default="runs")
     vf.add_argument("--force", action="store_true")
     vf.add_argument("--csv", help="also write the table as CSV")

