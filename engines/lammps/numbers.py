@@ -76,3 +76,35 @@ def lammps_numbers(params: dict) -> dict:
         "wall": {"E": wall_young(params["E_eff_pw"], mat["nu"]), "nu": mat["nu"], "kt": 8.0 * params["G_eff_pw"],
                  "xgt": tangential_damping_factor(params["E_eff_pw"], params["G_eff_pw"])},
     }
+
+
+def seed_law_numbers(E: float, nu: float, rho: float, d50: float, f_adh: float, mu: float,
+                     tangential_ratio: float = 2.0 / 7.0) -> dict:
+    """``pair_coeff`` numbers for seed 000's law (§3.1-3.2) on ``pair_style granular``, for a
+    material (E [Pa], ν, ρ [kg/m³]), median diameter ``d50`` [m], median pull-off ``f_adh`` [N]
+    and sliding coefficient μ:
+
+    - ``dmt E η_n0 ν γ``: F = 4/3 E* √R* δ^3/2 − 4πγR* with E* = E/(2(1−ν²)) (the seed's E_eff)
+      and γ = F_adh/(4π⟨r_eff⟩), ⟨r_eff⟩ = d50/4: the pull-off F_adh r_eff/⟨r_eff⟩ of every pair,
+      exact across the PSD;
+    - ``damping viscoelastic`` with η_n0 = γ_n/(m* √R*) of the median pair (:func:`viscoelastic_eta`;
+      exact for that pair only: η_n0 m* √R* / γ_n(pair) = √(m* R* / (m*₅₀ R*₅₀)) elsewhere);
+    - ``tangential linear_history k_t x_γt μ``: the seed's constant k_t = 2/7 · 4/3 E* x50/2;
+      its damping 2√(k_t m*) is matched by x_γt = 2√(k_t m*)/(η_n0 m* √(R* δ)) only at one
+      overlap δ (LAMMPS scales tangential damping with the normal one), given here for δ =
+      ``d50`` · 1e-3 (returned as ``xgt``; ``xgt_overlap`` says which δ).
+
+    LAMMPS' sliding limit with ``dmt`` is μ|F_ne + 2·4πγR*| = μ(F_Hertz + F_adh) (Thornton 1991,
+    Marshall 2009 eq. 43; ``GranSubModNormalDMT::set_fncrit``), the seed's μ|F_n + F_adh| =
+    μ|F_Hertz + F_damp|: they differ by μ(F_adh − F_damp), measured in tests/test_lammps_seed_law.py.
+    """
+    E_eff = E / (2.0 * (1.0 - nu * nu))
+    r50 = d50 / 2.0
+    m50 = rho * 4.0 / 3.0 * math.pi * r50 ** 3
+    m_eff, R_eff = m50 / 2.0, r50 / 2.0
+    eta = viscoelastic_eta(seed_gamma_n(E_eff, m_eff), m_eff, R_eff)
+    kt = tangential_ratio * 4.0 / 3.0 * E_eff * r50
+    overlap = d50 * 1e-3
+    xgt = 2.0 * math.sqrt(kt * m_eff) / (eta * m_eff * math.sqrt(R_eff * overlap))
+    return {"E": E, "nu": nu, "eta_n0": eta, "surface_energy": f_adh / (4.0 * math.pi * d50 / 4.0),
+            "kt": kt, "xgt": xgt, "xgt_overlap": overlap, "mu": mu, "E_eff": E_eff}
