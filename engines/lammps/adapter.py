@@ -50,6 +50,7 @@ class Lammps(Engine):
         "low_restitution": "damping coeff_restitution: any e_n in (0, 1]",
         "sliding_friction": "tangential mindlin k_t = 8 G* a, total-displacement history, Coulomb limit mu*Fn",
         "plane_wall": "fix wall/gran granular ... zplane",
+        "periodic": "boundary p",
     }
     substitutes: dict[str, dict[str, str]] = {}
 

@@ -327,6 +327,10 @@ def liggghts_extras(run_dir, params) -> dict:
     return out
 
 
+#: LAMMPS writes the same wall file (fix ave/time, templates/lammps/plane_shear.in.j2)
+lammps_extras = liggghts_extras
+
+
 def yade_extras(run_dir, params) -> dict:
     run_dir = Path(run_dir)
     rows = [np.load(f) for f in sorted(run_dir.glob("walls.yade.*.npy"))]
