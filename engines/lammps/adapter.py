@@ -23,7 +23,7 @@ import numpy as np
 
 from orchestrator.atomic import write_json
 
-from ..base import Engine, EngineError, tail
+from ..base import Engine, EngineError, UnsupportedFeature, tail
 from ..liggghts import _COLUMNS, _fields, dump_columns, dump_segments, write_data_file
 from ..render import render_template
 from .dump import read_binary_dump, truncate_binary_dump
@@ -77,6 +77,11 @@ class Lammps(Engine):
     # -- render -----------------------------------------------------------------------------
     def render(self, case, params, run_dir: Path, resume=None) -> Path:
         run_dir = Path(run_dir)
+        asked = [k for k in ("stress", "contacts") if getattr(case.output, k, False)]
+        if asked:
+            raise UnsupportedFeature(f"{case.source or case.name}: output.{asked[0]}: the LAMMPS decks do not write "
+                                     f"per-particle stress or contact lists yet; set output.{asked[0]}: false or run "
+                                     "this case on liggghts or yade")
         for d in ("dump", "restart"):
             (run_dir / d).mkdir(exist_ok=True)
         sc = params["scene"]
