@@ -51,8 +51,18 @@ class Lammps(Engine):
         "sliding_friction": "tangential mindlin k_t = 8 G* a, total-displacement history, Coulomb limit mu*Fn",
         "plane_wall": "fix wall/gran granular ... zplane",
         "periodic": "boundary p",
+        "rolling_friction": "rolling sds: k_r = k_t (torque k_t R*^2 per radian), limit mu_r R* F_ncrit (plane shear)",
     }
-    substitutes: dict[str, dict[str, str]] = {}
+    substitutes = {
+        "rolling_friction_load": {
+            "sds_constant": "rolling sds with a constant mu_r = sqrt(2 r_eff xi)/r_eff at the expected overlap "
+                            "(the seed's lever arm sqrt(2 r_eff xi) grows with the load)",
+        },
+        "torsion_friction": {
+            "sds_median_pair": "twisting sds with the median pair's k_tw = k_t r_eff^2 and limit mu_tor r_eff F_ncrit "
+                               "(one number per type pair; the seed's scales with each pair's r_eff)",
+        },
+    }
 
     # -- discovery -------------------------------------------------------------------------
     def available(self) -> bool:
@@ -90,7 +100,7 @@ class Lammps(Engine):
             write_data_file(data, run_dir / "particles.txt", sc["box_lo"], sc["box_hi"])
         cols = dump_columns(case)
         ctx = {
-            "case": case, "p": params, "lmp": lammps_numbers(params), "resume": resume,
+            "case": case, "p": params, "lmp": lammps_numbers(params, case), "resume": resume,
             "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
             "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
             "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),

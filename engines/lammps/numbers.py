@@ -65,11 +65,42 @@ def seed_gamma_n(E_eff: float, m_eff: float) -> float:
     return math.sqrt(4.0 / 3.0 * E_eff * m_eff)
 
 
-def lammps_numbers(params: dict) -> dict:
-    """The numbers the LAMMPS templates need beyond ``params`` (SI)."""
+def rolling_twisting(contact: dict, d50: float, rho: float) -> dict:
+    """``rolling sds k_r γ_r μ_r`` and ``twisting sds k_tw γ_tw μ_tw`` for seed 000's rolling and
+    twisting resistance (§3.2), from a scene's contact numbers (``yade_krot`` = ``yade_ktwist`` =
+    k_t r_eff², ``rolling_coefficient`` μ_r with M_max = μ_r r_eff |F_n|, ``torsion_coefficient``
+    μ_tor/r_eff), for the median pair (r_eff = d50/4, m_eff = m50/2).
+
+    LAMMPS (``gran_sub_mod_rolling``): F_r = −k_r ξ_r − γ_r v_r, ξ_r = ∫v_r dt the rolling
+    displacement (R* × relative rotation), limited by μ_r F_ncrit, torque R* × F_r; so the
+    torque per radian is k_r R*² and the limit μ_r R* F_ncrit: k_r = k_t and μ_r exact for every
+    pair. Twisting (``gran_sub_mod_twisting``, Marshall 2009 eqs. 30, 44): M = −k_tw ψ − γ_tw ω,
+    limit μ_tw F_ncrit: k_tw = k_t r_eff² and μ_tw = μ_tor r_eff of the median pair (one number
+    per type pair: a named substitute). Dashpots: the seed's 2√(k m*) (§3.2, "all springs
+    utilized for friction are damped"), with I* = 2/5 m r² / 2 for the twist."""
+    r_eff = d50 / 4.0
+    m50 = rho * 4.0 / 3.0 * math.pi * (d50 / 2.0) ** 3
+    m_eff, I_eff = m50 / 2.0, 0.4 * m50 * (d50 / 2.0) ** 2 / 2.0
+    out = {}
+    if "rolling_coefficient" in contact:
+        kr = contact["yade_krot"] / r_eff ** 2
+        out["rolling"] = {"k": kr, "gamma": 2.0 * math.sqrt(kr * m_eff), "mu": contact["rolling_coefficient"]}
+    if "torsion_coefficient" in contact:
+        ktw = contact["yade_ktwist"]
+        out["twisting"] = {"k": ktw, "gamma": 2.0 * math.sqrt(ktw * I_eff), "mu": contact["torsion_coefficient"] * r_eff}
+    return out
+
+
+def lammps_numbers(params: dict, case=None) -> dict:
+    """The numbers the LAMMPS templates need beyond ``params`` (SI); ``case`` for the scenes with
+    rolling and twisting resistance (their median diameter)."""
     mat = params["material"]
     d = restitution_damping(params)
-    return {
+    extra = {}
+    contact = params.get("scene", {}).get("contact")
+    if isinstance(contact, dict) and case is not None and hasattr(getattr(case.scene, "psd", None), "median"):
+        extra = rolling_twisting(contact, case.scene.psd.median, mat["rho"])
+    return {**extra,
         "damping": d,
         "pair": {"E": mat["E"], "nu": mat["nu"], "kt": 8.0 * params["G_eff_pp"],
                  "xgt": tangential_damping_factor(params["E_eff_pp"], params["G_eff_pp"])},
