@@ -213,3 +213,20 @@ def test_monitor_stops_a_run_and_the_runner_marks_it_unstable(lmp, tmp_path):
         checks.monitor_limits = orig
     assert out.status == "unstable"
     assert "ORCH_UNSTABLE:kinetic_energy" in (out.run_dir / "engine.log").read_text()
+
+
+def test_rolling_and_twisting_numbers_are_the_seeds_springs_and_limits():
+    """LAMMPS' rolling torque per radian is k_r R*² and its limit μ_r R* F_ncrit: the seed's
+    k_t r_eff² and μ_r r_eff |F_n| for every pair when k_r = k_t; the twist is the median pair's."""
+    from engines.lammps.numbers import rolling_twisting
+    d50, rho, kt = 30e-6, 2230.0, 1.9e5
+    r_eff = d50 / 4
+    c = {"yade_krot": kt * r_eff ** 2, "yade_ktwist": kt * r_eff ** 2, "rolling_coefficient": 0.3,
+         "torsion_coefficient": 0.58}
+    n = rolling_twisting(c, d50, rho)
+    assert n["rolling"]["k"] == pytest.approx(kt, rel=1e-14, abs=0)
+    assert n["rolling"]["mu"] == 0.3                    # M_max = mu_r R* F_ncrit: the scene's mu_r itself
+    m_eff = rho * 4 / 3 * math.pi * (d50 / 2) ** 3 / 2
+    assert n["rolling"]["gamma"] == pytest.approx(2 * math.sqrt(kt * m_eff), rel=1e-14, abs=0)
+    assert n["twisting"]["k"] == c["yade_ktwist"] and n["twisting"]["mu"] == pytest.approx(0.58 * r_eff, rel=1e-14, abs=0)
+    assert rolling_twisting({}, d50, rho) == {}
