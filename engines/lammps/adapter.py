@@ -127,9 +127,25 @@ class Lammps(Engine):
         return int(m.group(1)) if m else None
 
     def explain_failure(self, log: Path) -> str:
+        """LAMMPS' ERROR line, the input line it names ('Last input line:' in 2025, 'Last
+        command:' before) with its line number in the deck, and the log's tail."""
         text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
-        msg = "".join(f"LAMMPS says: {l.strip()}\n" for l in text.splitlines()
-                      if l.startswith("ERROR") or l.startswith("Last command:"))
+        msg = ""
+        for line in text.splitlines():
+            s = line.strip()
+            if s.startswith("ERROR"):
+                msg += f"LAMMPS says: {s}\n"
+            m = re.match(r"(Last input line|Last command):\s*(.*\S)", s)
+            if m:
+                where = ""
+                for name in ("resume.in", "deck.in"):
+                    deck = Path(log).parent / name
+                    if deck.exists():
+                        lines = [d.strip() for d in deck.read_text(errors="replace").splitlines()]
+                        if m.group(2) in lines:
+                            where = f"on {name} line {lines.index(m.group(2)) + 1}: "
+                            break
+                msg += f"{where}{m.group(2)}\n"
         return msg + tail(log, 12)
 
     def loop_time(self, log: Path) -> float:
