@@ -89,7 +89,7 @@ def make_dump(workdir: Path) -> Path:
 
 
 def parse_into_frames(dump: Path, out: Path) -> float:
-    from engines.liggghts import read_dump
+    from engines.lammps_dump import read_dump
     from orchestrator.frames import FrameWriter
     t0 = time.perf_counter()
     step, cols, a = read_dump(dump)

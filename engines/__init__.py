@@ -1,22 +1,13 @@
-"""Engine adapters behind one interface (:class:`engines.base.Engine`)."""
+"""Engine adapters behind one interface (:class:`engines.base.Engine`), one package per engine
+(``engines/<name>/``), registered under the entry-point group ``orchestrator.engines``
+(pyproject.toml) and found through :mod:`orchestrator.registry`. Shared here: the interface
+(:mod:`engines.base`), Jinja rendering (:mod:`engines.render`) and the LAMMPS-dump-family readers
+(:mod:`engines.lammps_dump`).
+"""
 from __future__ import annotations
+
+from orchestrator.registry import engine_names, get_engine
 
 from .base import Engine, EngineError, Substitution, UnsupportedFeature
 
-
-def get_engine(name: str) -> Engine:
-    """The adapter for ``name`` (one of :data:`ENGINE_NAMES`)."""
-    if name == "liggghts":
-        from .liggghts import Liggghts
-        return Liggghts()
-    if name == "yade":
-        from .yade import Yade
-        return Yade()
-    if name == "lammps":
-        from .lammps import Lammps
-        return Lammps()
-    raise KeyError(f"unknown engine {name!r}; known: {', '.join(ENGINE_NAMES)}")
-
-
-ENGINE_NAMES = ("liggghts", "yade", "lammps")
-__all__ = ["Engine", "EngineError", "Substitution", "UnsupportedFeature", "get_engine", "ENGINE_NAMES"]
+__all__ = ["Engine", "EngineError", "Substitution", "UnsupportedFeature", "get_engine", "engine_names"]

@@ -32,14 +32,19 @@ Physics features (the vocabulary scenes use in ``required_features``):
 """
 from __future__ import annotations
 
+import ctypes
 import os
+import selectors
 import shutil
 import signal
 import subprocess
+import sys
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from orchestrator.resources import templates_dir
 
 FEATURES = (
     "hertz", "restitution_damping", "low_restitution", "seed000_damping", "sliding_friction", "adhesion",
@@ -48,11 +53,10 @@ FEATURES = (
     "placed_clumps", "particle_stress", "contact_output", "periodic",
 )
 
-REPO = Path(__file__).resolve().parents[1]
-
 #: engine version per (adapter, executable), probed once per process (Engine.version)
 _VERSIONS: dict = {}
-TEMPLATES = REPO / "templates"
+#: ``<engine>/<scene>.<ext>.j2``: the top-level templates/ folder, shipped as package data
+TEMPLATES = templates_dir()
 
 
 class EngineError(RuntimeError):
@@ -93,6 +97,21 @@ class Engine(ABC):
     capabilities: dict[str, str] = {}
     #: feature -> {substitute name: description} the engine can offer instead
     substitutes: dict[str, dict[str, str]] = {}
+    #: single-worker throughput [particle-steps/s] for run-time estimates when
+    #: benchmarks/throughput.json holds no measurement (ENGINES.md: 2000 dense Hertz spheres)
+    throughput: float = 1e6
+    #: process start-up and set-up [s] (tiny verification cases: engine time minus loop time)
+    startup: float = 1.0
+
+    def workers(self, case) -> int:
+        """Parallel workers a run of ``case`` uses (threads by default)."""
+        return case.engine_options.threads
+
+    def complete_resume(self, case, run_dir: Path, resume: dict | None) -> dict | None:
+        """Check and complete the resume point :meth:`resume_state` found for the case's scene
+        (e.g. the stage state a deck needs to re-enter the right stage); None: start afresh. The
+        default takes it as it is."""
+        return resume
 
     # -- discovery -------------------------------------------------------------------------
     def available(self) -> bool:
@@ -135,6 +154,11 @@ class Engine(ABC):
                                      f"run this case on another engine (engines: [...])")
         return subs
 
+    def print_monitors(self, deck_text: str, overlap_limit: float) -> str:
+        """The rendered deck patched so that its in-deck monitors print ``ORCH_OV <step> <overlap/r_min>
+        <kinetic energy>`` at every check and trip at ``overlap_limit`` (orchestrator.stability.history)."""
+        raise NotImplementedError(f"{self.name}: no monitor histories")
+
     # -- the three steps -------------------------------------------------------------------
     @abstractmethod
     def render(self, case, params: dict, run_dir: Path, resume: dict | None = None) -> Path:
@@ -175,7 +199,6 @@ class Engine(ABC):
                                     env=full_env, start_new_session=True, preexec_fn=_die_with_parent)
             bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress)
             try:
-                import selectors
                 sel = selectors.DefaultSelector()
                 sel.register(proc.stdout, selectors.EVENT_READ)
                 buf = b""
@@ -213,8 +236,8 @@ class Engine(ABC):
             raise EngineError(f"{self.name} exceeded its wall-clock limit of {timeout:.0f} s and was killed "
                               f"(engine_options.timeout).\n{tail(log)}")
         if proc.returncode != 0:
-            raise EngineError(f"{self.name} failed with exit status {proc.returncode} running {deck}.\n"
-                              f"{self.explain_failure(log)}")
+            raise EngineError(f"{self.name} {_exit_words(proc.returncode)} running {deck}; the run directory keeps "
+                              f"its restart points: run the same command again to resume.\n{self.explain_failure(log)}")
         return res
 
     def explain_failure(self, log: Path) -> str:
@@ -225,11 +248,22 @@ class Engine(ABC):
         return float("nan")
 
 
+def _exit_words(code: int) -> str:
+    """'failed with exit status N' or 'was killed by signal SIGSEGV (11)' (a negative code, or 128 + the
+    signal from a shell or mpirun)."""
+    sig = -code if code < 0 else code - 128 if 128 < code < 160 else None
+    if sig:
+        try:
+            return f"was killed by signal {signal.Signals(sig).name} ({sig})"
+        except ValueError:
+            pass
+    return f"failed with exit status {code}"
+
+
 def _die_with_parent():
     """In the child: ask Linux to send SIGTERM when the orchestrator dies (PR_SET_PDEATHSIG), so a
     killed orchestrator never leaves an engine writing into a run directory."""
     try:
-        import ctypes
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
     except OSError:  # pragma: no cover - not Linux
         pass
@@ -257,18 +291,27 @@ def tail(path: Path, n: int = 25) -> str:
 
 
 class _Progress:
-    """A rich progress bar with ETA, fed with the engine's step counter."""
+    """A rich progress bar with ETA, fed with the engine's step counter; not on a terminal (a log,
+    a batch job), one line on stderr every :attr:`EVERY` seconds instead."""
+
+    #: seconds between two progress lines when stderr is not a terminal
+    EVERY = 30.0
 
     def __init__(self, label: str, total: int, enabled: bool = True):
+        import sys
         self.p = None
+        self.lines = False
         if not enabled or total <= 0:
             return
+        self.label, self.total, self.t0 = label, total, time.perf_counter()
+        self.first = None                        # (time, step) of the first report: a resumed run starts late
+        self.next = self.t0 + self.EVERY
+        if not sys.stderr.isatty():
+            self.lines = True
+            return
         try:
-            import sys
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
-            if not sys.stderr.isatty():
-                return
             self.p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                               TimeElapsedColumn(), TimeRemainingColumn(), transient=True)
             self.p.start()
@@ -279,6 +322,18 @@ class _Progress:
     def update(self, step: int):
         if self.p is not None:
             self.p.update(self.task, completed=step)
+        elif self.lines:
+            import sys
+            now = time.perf_counter()
+            if self.first is None:
+                self.first = (now, step)
+            if now >= self.next:
+                self.next = now + self.EVERY
+                t, s0 = self.first
+                rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
+                eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
+                print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "
+                      f"{now - self.t0:.0f} s{eta}", file=sys.stderr, flush=True)
 
     def close(self):
         if self.p is not None:

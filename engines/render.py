@@ -6,6 +6,10 @@ import hashlib
 from pathlib import Path
 
 import jinja2
+from jinja2 import meta
+
+from orchestrator import __version__
+from orchestrator.atomic import write_text
 
 from .base import TEMPLATES
 
@@ -34,8 +38,6 @@ def _environment() -> jinja2.Environment:
 
 
 def render_template(name: str, context: dict, out: Path) -> Path:
-    from orchestrator import __version__
-    from orchestrator.atomic import write_text
     ctx = {"version": __version__, "case_source": getattr(context.get("case"), "source", ""), **context}
     try:
         text = environment().get_template(name).render(**ctx)
@@ -49,7 +51,6 @@ def scene_templates(engine: str, scene: str) -> list[str] | None:
     """The templates a scene's deck is rendered from: its main template and, recursively, every
     template it includes or imports (jinja2.meta). None when a reference is computed at render
     time (then every template of the engine counts) or the scene has no template."""
-    from jinja2 import meta
     env = environment()
     mains = [f"{engine}/{scene}{ext}" for ext in (".in.j2", ".py.j2") if (TEMPLATES / engine / f"{scene}{ext}").is_file()]
     if not mains:

@@ -7,6 +7,27 @@ import os
 from pathlib import Path
 
 
+def umask() -> int:
+    """The process's file-creation mask (read by setting and restoring it)."""
+    m = os.umask(0o022)
+    os.umask(m)
+    return m
+
+
+def temp_file(path, suffix: str = "") -> Path:
+    """A new empty temporary file beside ``path`` whose mode follows the user's umask (as a file
+    opened normally would): :func:`tempfile.mkstemp` makes it 0600 and a rename keeps that mode,
+    so a colleague on a shared filesystem could not read the result."""
+    import tempfile
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=suffix, dir=path.parent)
+    try:
+        os.fchmod(fd, 0o666 & ~umask())
+    finally:
+        os.close(fd)
+    return Path(tmp)
+
+
 def write_text(path, text: str) -> Path:
     path = Path(path)
     tmp = path.with_name(path.name + ".partial")

@@ -9,17 +9,16 @@ from __future__ import annotations
 import difflib
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal, Union, get_args
 
 import yaml
-from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_validator,
+from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, field_validator,
                       model_validator)
 
+from .derive import DerivationError, derive
+from .registry import engine_names, get_scene, scene_kinds
+from .resources import templates_dir
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
-
-ENGINES = ("liggghts", "yade", "lammps")
-#: the engines a case runs on when it names none (LAMMPS runs the scenes it has decks for: ask for it)
-DEFAULT_ENGINES = ("liggghts", "yade")
 
 
 class CaseError(ValueError):
@@ -134,13 +133,8 @@ class TimeStep(Strict):
     dt: Time | None = None
     allow_unsafe: bool = False
 
-    @field_validator("fraction")
-    @classmethod
-    def _frac(cls, v):
-        if v > 1:
-            raise ValueError(f"a time step fraction of {v} is above the critical time step; use <= 0.3 "
-                             "(0.1-0.2 is usual for Hertz contacts)")
-        return v
+    # (a fraction above what the case's stability limits allow is refused by orchestrator.derive,
+    # with the largest safe fraction of that case)
 
 
 class StabilityOptions(Strict):
@@ -173,6 +167,15 @@ class Output(Strict):
     torque: bool = False
     stress: bool = False
     contacts: bool = False
+
+    #: per-particle frames.h5 fields, in the order frames.h5 lists them
+    FIELDS: ClassVar[tuple[str, ...]] = ("position", "velocity", "angular_velocity", "orientation", "force",
+                                         "torque", "stress")
+
+    def fields(self, written: tuple[str, ...] = FIELDS) -> list[str]:
+        """The per-particle fields the case asks for (position always), in frames.h5 order, among
+        those an engine ``written`` can write (the one output-field selection of every adapter)."""
+        return [f for f in self.FIELDS if f in written and (f == "position" or getattr(self, f))]
 
 
 class InitialPacking(Strict):
@@ -219,11 +222,10 @@ class CTSeries(Strict):
 # The case
 # ---------------------------------------------------------------------------------------------
 def _scene_union():
-    from .scenes import scene_models
-    models = scene_models()
+    """The union of every registered scene's case section, told apart by ``kind``."""
+    models = [get_scene(k).section for k in scene_kinds()]
     if len(models) == 1:
         return models[0]
-    from typing import Union
     return Annotated[Union[tuple(models)], Field(discriminator="kind")]
 
 
@@ -231,7 +233,7 @@ class Case(Strict):
     """A simulation case. Everything in SI after loading."""
     name: str
     description: str = ""
-    engines: list[Literal["liggghts", "yade", "lammps"]] = Field(default_factory=lambda: list(DEFAULT_ENGINES))
+    engines: list[str] = Field(default_factory=lambda: list(engine_names()))
     seed: int = 12345
     material: Material
     wall: Material | RigidWall = Field(default_factory=RigidWall)
@@ -246,6 +248,25 @@ class Case(Strict):
     ct: CTSeries | None = None
     initial_packing: InitialPacking | None = None
 
+    @field_validator("engines")
+    @classmethod
+    def _engines(cls, v):
+        known = engine_names()
+        for name in v:
+            if name not in known:
+                raise ValueError(f"unknown engine {name!r}; installed engines: {', '.join(known)}")
+        return v
+
+    @model_validator(mode="after")
+    def _default_engines_have_decks(self):
+        """A case that names no engines runs on every installed engine that has a deck for its
+        scene (LAMMPS has no shear-cell or triaxial deck yet); named engines are kept as given."""
+        if "engines" not in self.model_fields_set:
+            kind = getattr(self.scene, "kind", None)
+            if kind is not None:
+                self.engines = [e for e in self.engines if any((templates_dir() / e).glob(f"{kind}.*.j2"))]
+        return self
+
     @field_validator("analysis")
     @classmethod
     def _analysis(cls, v):
@@ -257,8 +278,14 @@ class Case(Strict):
     @field_validator("scene", mode="before")
     @classmethod
     def _scene(cls, v):
-        from pydantic import TypeAdapter
         return TypeAdapter(_scene_union()).validate_python(v)
+
+    def wall_moduli(self) -> tuple[float, float]:
+        """(E_wall [Pa], ν_wall) from the ``wall`` section (a rigid wall: stiffness_ratio × E)."""
+        w = self.wall
+        if isinstance(w, RigidWall):
+            return self.material.youngs_modulus * w.stiffness_ratio, w.poisson_ratio
+        return w.youngs_modulus, w.poisson_ratio
 
     @property
     def source(self) -> str | None:
@@ -298,12 +325,7 @@ def _merge(base: dict, over: dict) -> dict:
 def read_case_data(path, _seen=()) -> dict:
     """Read YAML, following ``extends:`` chains (relative to each file)."""
     path = Path(path)
-    if not path.exists():
-        raise CaseError(path, ["file not found"])
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise CaseError(path, [f"not valid YAML: {exc}"]) from None
+    data = yaml_or_case_error(path)
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -319,27 +341,51 @@ def read_case_data(path, _seen=()) -> dict:
     return data
 
 
+def yaml_or_case_error(path: Path):
+    """Parse a YAML case file; a missing, unreadable, binary or malformed one is a CaseError that
+    says what the file is and what to give instead."""
+    fix = "give a YAML case file, e.g. cases/shear_cell_smoke.yaml"
+    if not path.exists():
+        raise CaseError(path, [f"file not found; {fix}"])
+    if path.is_dir():
+        raise CaseError(path, [f"is a directory, not a case file; {fix}"])
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CaseError(path, [f"not a text file (byte {exc.start} is not UTF-8); {fix}"]) from None
+    except PermissionError:
+        raise CaseError(path, [f"cannot be read (permission denied); make it readable (chmod u+r {path})"]) from None
+    if "\x00" in text:
+        raise CaseError(path, [f"not a text file (it holds NUL bytes); {fix}"])
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise CaseError(path, [f"not valid YAML: {exc}"]) from None
+
+
 def _hint_extra(model_fields: list[str], key: str) -> str:
     near = difflib.get_close_matches(key, model_fields, n=1)
     alt = f"did you mean '{near[0]}'? " if near else ""
     return f"unknown field; {alt}allowed here: {', '.join(sorted(model_fields))}"
 
 
-def _allowed_fields(loc: tuple) -> list[str]:
-    """Field names allowed at the parent of ``loc`` (best effort, for hints)."""
+def _allowed_fields(loc: tuple, scene_kind: str | None = None) -> list[str]:
+    """Field names allowed at the parent of ``loc`` (best effort, for hints); ``scene_kind``
+    picks the scene model below ``scene``."""
     model: Any = Case
     for part in loc[:-1]:
         if isinstance(part, int):
             continue
         fields = getattr(model, "model_fields", {})
-        if part in fields:
+        if part == "scene" and model is Case and scene_kind:
+            model = get_scene(scene_kind).section
+        elif part in fields:
             ann = fields[part].annotation
             model = _first_model(ann)
         elif part == "scene":
             model = None
         else:
-            from .scenes import scene_models
-            for m in scene_models():
+            for m in (get_scene(k).section for k in scene_kinds()):
                 if m.__name__ == part or getattr(m, "_kind", None) == part:
                     model = m
                     break
@@ -349,10 +395,9 @@ def _allowed_fields(loc: tuple) -> list[str]:
 
 
 def _first_model(ann):
-    import typing
     if isinstance(ann, type) and issubclass(ann, BaseModel):
         return ann
-    for a in typing.get_args(ann):
+    for a in get_args(ann):
         m = _first_model(a)
         if m is not None:
             return m
@@ -365,9 +410,10 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         loc = prefix + tuple(e["loc"])
         # strip discriminator tags pydantic inserts for unions (e.g. 'impact')
         clean = tuple(p for p in loc if not (isinstance(p, str) and p.endswith("]")))
+        kind = None
         if len(clean) > 1 and clean[0] == "scene":
-            from .scenes import scene_kinds
             if clean[1] in scene_kinds():        # the discriminated union's tag
+                kind = clean[1]
                 clean = clean[:1] + clean[2:]
         path = ".".join(str(p) for p in clean) or "(top level)"
         typ = e["type"]
@@ -375,18 +421,60 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, "):]
         if typ == "extra_forbidden":
-            allowed = _allowed_fields(clean)
+            allowed = _allowed_fields(clean, kind)
             problems.append(f"{path}: {_hint_extra(allowed, str(clean[-1])) if allowed else 'unknown field; remove it'}")
         elif typ == "missing":
             problems.append(f"{path}: required field is missing; add it")
         elif typ == "union_tag_invalid" or typ == "union_tag_not_found":
-            from .scenes import scene_kinds
             problems.append(f"{path}: {msg}; scene.kind must be one of {', '.join(scene_kinds())}")
         else:
             got = e.get("input")
             got_s = f" (got {got!r})" if got is not None and not isinstance(got, dict) else ""
-            problems.append(f"{path}: {msg}{got_s}")
+            problems.append(f"{path}: {msg}{got_s}{_fix_hint(typ, e, clean, kind, got)}")
     return problems
+
+
+#: pydantic's bound errors -> the words of the fix
+_BOUNDS = {"greater_than": "above {gt}", "greater_than_equal": "of at least {ge}", "less_than": "below {lt}",
+           "less_than_equal": "of at most {le}"}
+
+
+def _field_default(loc: tuple, kind: str | None):
+    """The default of the field at ``loc`` (None when it has none or cannot be found)."""
+    from pydantic_core import PydanticUndefined
+    model: Any = Case
+    for k, part in enumerate(loc):
+        if isinstance(part, int):
+            continue
+        if part == "scene" and model is Case and kind:
+            model = get_scene(kind).section
+            continue
+        f = getattr(model, "model_fields", {}).get(part)
+        if f is None:
+            return None
+        if k == len(loc) - 1 or (k == len(loc) - 2 and isinstance(loc[-1], int)):
+            d = f.default
+            return None if d is PydanticUndefined or isinstance(d, (BaseModel, dict, list)) else d
+        model = _first_model(f.annotation)
+        if model is None:
+            return None
+    return None
+
+
+def _fix_hint(typ: str, e: dict, loc: tuple, kind, got) -> str:
+    """The fix for a pydantic type or bound error: what to write instead (pydantic's own text says
+    only what was wrong)."""
+    field = ".".join(str(p) for p in loc)
+    default = _field_default(loc, kind)
+    example = f" (default {default!r})" if default is not None and not isinstance(default, bool) else ""
+    if typ in _BOUNDS:
+        return f"; set {field} to a value {_BOUNDS[typ].format(**(e.get('ctx') or {}))}{example}"
+    if typ.endswith(("_type", "_parsing")) and isinstance(got, (list, tuple, dict)):
+        return f"; {field} takes one value, not a {type(got).__name__}: write e.g. {field.split('.')[-1]}: " \
+               f"{default if default is not None else '...'}"
+    if typ.endswith(("_type", "_parsing")):
+        return f"; write {field} as a {typ.split('_')[0]}{', e.g. ' + repr(default) if default is not None else ''}"
+    return ""
 
 
 def load_case(path, overrides: dict | None = None, check_timestep: bool = True) -> Case:
@@ -398,7 +486,55 @@ def load_case(path, overrides: dict | None = None, check_timestep: bool = True) 
     ip = data.get("initial_packing")
     if isinstance(ip, dict) and isinstance(ip.get("frames"), str) and not Path(ip["frames"]).is_absolute():
         data["initial_packing"] = dict(ip, frames=str((path.parent / ip["frames"]).resolve()))
-    return case_from_dict(data, source=path, check_timestep=check_timestep)
+    try:
+        return case_from_dict(data, source=path, check_timestep=check_timestep)
+    except CaseError as exc:
+        raise _blame_parents(path, exc) from None
+
+
+def _extends_chain(path: Path) -> list[tuple[Path, dict]]:
+    """(file, its own fields) along the ``extends:`` chain, the case file first."""
+    out, seen = [], set()
+    while path is not None and path not in seen:
+        seen.add(path)
+        try:
+            data = yaml.safe_load(path.read_text()) or {}
+        except Exception:
+            break
+        if not isinstance(data, dict):
+            break
+        out.append((path, data))
+        parent = data.get("extends")
+        path = (path.parent / parent).resolve() if isinstance(parent, str) else None
+    return out
+
+
+def _blame_parents(path: Path, exc: CaseError) -> CaseError:
+    """Report each problem against the file of the ``extends:`` chain that sets the field: an error
+    in a parent case is fixed in the parent, not in the case that extends it."""
+    chain = _extends_chain(path)
+    if len(chain) < 2:
+        return exc
+    files = []
+    problems = []
+    for prob in exc.problems:
+        field = prob.split(":", 1)[0].strip()
+        keys = field.split(".") if field and " " not in field else []
+        owner, best = None, 0
+        for f, d in chain:                       # the nearest file that sets the most of this field's path
+            node, depth = d, 0
+            for k in keys:
+                if not isinstance(node, dict) or k not in node:
+                    break
+                node, depth = node[k], depth + 1
+            if depth > best:
+                owner, best = f, depth
+        files.append(owner)
+        problems.append(prob if owner is None or owner == chain[0][0] else f"{prob} [set in {owner}]")
+    owners = set(files)
+    if len(owners) == 1 and None not in owners and files[0] != chain[0][0]:
+        return CaseError(f"{files[0]} (extended by {path})", exc.problems)
+    return CaseError(path, problems)
 
 
 def case_from_dict(data: dict, source="<dict>", check_timestep: bool = True) -> Case:
@@ -416,8 +552,11 @@ def case_from_dict(data: dict, source="<dict>", check_timestep: bool = True) -> 
                     exc.title, [e]) if False else _single(exc, e))
         raise CaseError(source, problems) from None
     object.__setattr__(case, "_source", str(source))
+    # a term the scene does not realise in any engine's deck is refused, never dropped silently
+    refused = get_scene(case.scene.kind).refused_terms(case)
+    if refused:
+        raise CaseError(source, refused)
     if check_timestep:
-        from .derive import derive, DerivationError
         try:
             derive(case)
         except DerivationError as exc:

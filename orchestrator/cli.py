@@ -1,10 +1,16 @@
-"""Command line: ``orchestrator <command>`` (``--help`` on each)."""
+"""Command line: ``orchestrator <command>`` (``--help`` on each).
+
+The commands import their modules when they run (not at the top): ``orchestrator --help`` and a
+``validate`` then start in well under a second instead of loading pandas, h5py, pyvista and dask.
+"""
 from __future__ import annotations
 
 import argparse
 import json
 import sys
 from pathlib import Path
+
+from .registry import engine_names, get_engine
 
 
 def _console():
@@ -36,6 +42,12 @@ def cmd_validate(args) -> int:
     con.print(f"  dt = {p['dt']:.4g} s = {p['dt_fraction']:.3g} × critical {p['dt_critical']:.4g} s "
               f"(Rayleigh {p['dt_rayleigh']:.4g} s, Hertz t_c/10 {p['dt_hertz']:.4g} s)")
     con.print(f"  features: {', '.join(p['features'])}")
+    from .sizing import describe, estimate, problems
+    for eng in case.engines:
+        size = estimate(case, p, eng)
+        con.print(f"  {eng}: {describe(size)}")
+        for prob in problems(case, size):
+            con.print(f"  [yellow]{prob if prob.startswith('warning:') else 'too big: ' + prob + ' (run refuses it unless --force)'}[/yellow]")
     return 0
 
 
@@ -46,36 +58,65 @@ def cmd_run(args) -> int:
     engines = case.engines if args.engine == "all" else [args.engine]
     con = _console()
     status = 0
+    from .derive import derive
+    from .sizing import check_fits, describe, estimate
+    params = derive(case)
     for eng in engines:
+        size = estimate(case, params, eng)
+        warnings = check_fits(case, size, force=args.force)        # refuses a case too big for the machine
+        con.print(f"[cyan]{eng}[/cyan]: {case.name}: {describe(size)}")
+        for w in warnings:
+            con.print(f"  [yellow]{w}[/yellow]")
+        if args.dry_run:
+            continue                              # sizing only: no packing, no meshes, no run directory
         out = run_case(case, eng, runs_root=args.runs, force=args.force, dry_run=args.dry_run,
                        progress=None if not args.quiet else False)
         s = out.summary
-        if args.dry_run:
-            con.print(f"[cyan]{eng}[/cyan]: rendered {out.run_dir / s['deck']} — {s['steps']} steps at dt = "
-                      f"{s['dt']:.4g} s; estimated engine time {_fmt_s(s['estimated_engine_time_s'])}")
-        else:
+        if True:
             wt = s.get("wall_time", {})
             tag = "reused" if out.reused else s["status"]
+            if s["status"] == "unstable":
+                status = 1
+                u = s.get("unstable") or {}
+                con.print(f"[red]{eng}: unstable[/red] {out.run_dir}: {u.get('meaning', u.get('figure'))}: "
+                          f"{u.get('figure')} = {u.get('value'):.6g} against the limit {u.get('limit'):.6g} at step "
+                          f"{u.get('step')}; lower timestep.fraction (the stability report is in summary.json) and "
+                          "run again")
+                continue
             con.print(f"[green]{eng}[/green]: {tag} {out.run_dir} — engine {wt.get('engine', 0):.1f} s, "
                       f"total {wt.get('total', 0):.1f} s")
             r = s.get("resumed_from")
             if r and not out.reused:
                 at = f" (step {r['step']})" if r.get("step") is not None else ""
                 con.print(f"  resumed from {r.get('restart_file') or r.get('checkpoint')}{at}")
+            if s.get("status") == "complete" and not args.no_report:
+                _closing_results(out.run_dir, con)
         for sub in s.get("substitutions", []):
             con.print(f"  substitution: {sub['feature']} -> {sub['mechanism']}: {sub['note']}")
     return status
 
 
+def _closing_results(run_dir, con) -> None:
+    """After a complete run: write report.html in the run directory (if missing) and print the
+    key results with where the frames, figures and report are."""
+    from .compare.report import write_run_report
+    from .results import print_key_results
+    if not (run_dir / "report.html").exists():
+        try:
+            write_run_report(run_dir)
+        except (OSError, ValueError, KeyError) as exc:     # the run is complete; the page is a convenience
+            con.print(f"  [yellow]report.html not written: {exc}[/yellow]")
+    print_key_results(run_dir, con)
+
+
 def cmd_engines(args) -> int:
     from rich.table import Table
-    from engines import ENGINE_NAMES, get_engine
     from engines.base import FEATURES
     con = _console()
     t = Table(title="DEM engines")
     t.add_column("feature")
-    engs = [get_engine(n) for n in ENGINE_NAMES]
-    for e in engs:          # versions on their own lines: a table cell would wrap them
+    engs = [get_engine(n) for n in engine_names()]
+    for e in engs:          # versions on their own lines: with three engines a table cell wraps them
         con.print(f"{e.name}: {e.version() if e.available() else 'not installed'}")
         t.add_column(e.name)
     for f in FEATURES:
@@ -96,8 +137,7 @@ def cmd_verify(args) -> int:
     from rich.table import Table
     from .verify import run_verification
     from .verify import verification_cases
-    from engines import ENGINE_NAMES
-    engines = list(ENGINE_NAMES) if args.engine == "all" else [args.engine]
+    engines = list(engine_names()) if args.engine == "all" else [args.engine]
     cases = [p for p in verification_cases() if not args.case or any(c in p.stem for c in args.case)]
     if not cases:
         print(f"error: no verification case matches {args.case}", file=sys.stderr)
@@ -131,6 +171,10 @@ def cmd_analyze(args) -> int:
     from .frames import Frames
     from .analysis import run_analyses
     run_dir = Path(args.run_dir)
+    if not run_dir.exists():
+        print(f"error: {run_dir}: no such run directory or frames.h5; give a run directory "
+              "(runs/<case>/<engine>-<hash>), a frames.h5 or a CT frame set", file=sys.stderr)
+        return 2
     specs = args.analysis
     if not specs:
         case_file = run_dir / "case.yaml"
@@ -156,20 +200,31 @@ def cmd_vtk(args) -> int:
 
 
 # ---------------------------------------------------------------------------------------------
-def build_parser() -> argparse.ArgumentParser:
+#: the commands defined in this module; the others come from command groups (ct, compare, stability)
+CORE_COMMANDS = ("run", "validate", "engines", "verify", "analyze", "vtk")
+
+
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """The parser; when ``argv`` names a core command the other command groups (whose imports take
+    seconds: analysis, plotting) are not loaded."""
     p = argparse.ArgumentParser(prog="orchestrator", description=__doc__.split("\n")[0] + "\n\n"
                                 "Runs LIGGGHTS and YADE on granular scenes from YAML cases, writes frames.h5, "
                                 "analyses and compares them.", formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="render, run and parse a case on one or both engines")
     r.add_argument("case", help="case YAML file")
-    r.add_argument("--engine", choices=["liggghts", "yade", "lammps", "all"], default="all",
+    r.add_argument("--engine", choices=[*engine_names(), "all"], default="all",
                    help="engine to run (default: all engines the case lists)")
-    r.add_argument("--force", action="store_true", help="redo a complete run from scratch")
-    r.add_argument("--dry-run", action="store_true", help="render decks and estimate run time only")
+    r.add_argument("--force", action="store_true", help="redo a complete run from scratch; run a case bigger than "
+                   "the machine")
+    r.add_argument("--dry-run", action="store_true", help="print particle count, steps, memory and engine time "
+                   "only (no packing, no run directory)")
     r.add_argument("--runs", default="runs", help="runs directory (default: ./runs)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--no-report", action="store_true",
+                   help="do not write report.html nor print the results table at the end")
     r.set_defaults(func=cmd_run)
 
     v = sub.add_parser("validate", help="validate a case file and show its derived time step")
@@ -180,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_engines)
 
     vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")
-    vf.add_argument("--engine", choices=["liggghts", "yade", "lammps", "all"], default="all")
+    vf.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     vf.add_argument("--runs", default="runs")
     vf.add_argument("--force", action="store_true")
     vf.add_argument("--csv", help="also write the table as CSV")
@@ -199,6 +254,9 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--out", help="output directory (default RUN_DIR/vtk)")
     k.set_defaults(func=cmd_vtk)
 
+    first = next((a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")), None)
+    if first in CORE_COMMANDS:
+        return p
     try:
         from .ct.cli import add_ct_parser
         add_ct_parser(sub)
@@ -218,23 +276,60 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from engines.base import EngineError
-    from .case import CaseError
-    args = build_parser().parse_args(argv)
+    """Exit status: 0 done, 1 a run or check that failed, 2 bad input (a case, a path, a file),
+    130 interrupted. Every error is one message; ``--debug`` adds the traceback."""
+    args = build_parser(argv).parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except CaseError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except EngineError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("interrupted: the run can be resumed by running the same command again", file=sys.stderr)
         return 130
+    except BaseException as exc:               # noqa: BLE001 - every error becomes one message
+        if isinstance(exc, SystemExit):
+            raise
+        if getattr(args, "debug", False):
+            import traceback
+            traceback.print_exc()
+        msg, status = error_message(exc)
+        print(f"error: {msg}", file=sys.stderr)
+        return status
+
+
+def error_message(exc: BaseException) -> tuple[str, int]:
+    """One message for an error (naming the file, what is wrong and the fix) and its exit status:
+    2 for bad input, 1 for a run or check that failed."""
+    import errno
+    from engines.base import EngineError
+    from .case import CaseError
+    from .frames import FramesError
+    if isinstance(exc, CaseError):
+        return str(exc), 2
+    if isinstance(exc, FramesError):
+        return str(exc), 2
+    if type(exc).__name__ in ("SegmentationError", "ScanError", "DerivationError", "SizeError"):   # bad input, said in full
+        return str(exc), 2
+    if isinstance(exc, EngineError):
+        return str(exc), 1
+    if isinstance(exc, OSError) and exc.filename is not None:
+        f = exc.filename
+        if isinstance(exc, PermissionError) or exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+            return (f"{f}: permission denied ({exc.strerror}); write somewhere you may (e.g. --runs or --out "
+                    f"in your home directory) or make the directory writable (chmod u+w)"), 2
+        if isinstance(exc, IsADirectoryError):
+            return f"{f}: is a directory; give a file", 2
+        if isinstance(exc, NotADirectoryError):
+            return f"{f}: a path component is not a directory; check the path", 2
+        if isinstance(exc, FileNotFoundError):
+            return f"{f}: no such file or directory; check the path", 2
+        if exc.errno == errno.ENOSPC:
+            return f"{f}: no space left on the device; free some space or use another --runs directory", 1
+        return f"{f}: {exc.strerror}", 2
+    if isinstance(exc, OSError):
+        return f"{exc}", 2
+    if isinstance(exc, ValueError):
+        return f"{exc}", 2
+    return (f"{type(exc).__name__}: {exc} (an internal error: please report it with the output of the same "
+            f"command run with --debug)"), 1
 
 
 if __name__ == "__main__":

@@ -362,7 +362,7 @@ class Frames:
         if not path.exists():
             raise FileNotFoundError(f"{path}: no frames.h5 here (is the run complete?)")
         self.path = path
-        with h5py.File(path, "r") as h:
+        with _open_h5(path) as h:
             self.ids = h["particles/id"][()]
             self.radius = h["particles/radius"][()]
             self.mass = h["particles/mass"][()] if "mass" in h["particles"] else None
@@ -398,7 +398,7 @@ class Frames:
         if name not in self.fields:
             raise KeyError(f"{self.path}: no field {name!r}; this file has {list(self.fields)}")
         if name not in self._cache:
-            with h5py.File(self.path, "r") as h:
+            with _open_h5(self.path) as h:
                 self._cache[name] = h["frames"][name][()]
         return self._cache[name]
 
@@ -416,7 +416,7 @@ class Frames:
 
     def __getitem__(self, k: int) -> Frame:
         k = range(self.n_frames)[k]
-        with h5py.File(self.path, "r") as h:
+        with _open_h5(self.path) as h:
             data = {f: h["frames"][f][k] for f in self.fields}
         return Frame(k, float(self.time[k]), int(self.step[k]), self.ids, self.radius, data,
                      {c: float(v[k]) for c, v in self.controls.items()})
@@ -428,7 +428,7 @@ class Frames:
     def contacts(self, k: int):
         """Contacts of frame k as a DataFrame (i, j, point, normal, fn, ft split into x/y/z)."""
         k = range(self.n_frames)[k]
-        with h5py.File(self.path, "r") as h:
+        with _open_h5(self.path) as h:
             if str(k) not in h["contacts"]:
                 raise KeyError(f"{self.path}: frame {k} has no contacts; frames with contacts: {self.contact_frames}")
             return _group_table(h["contacts"][str(k)], CONTACT_FIELDS)
@@ -436,13 +436,13 @@ class Frames:
     def contact_arrays(self, k: int) -> dict:
         """Contacts of frame k as a dict of arrays (``i``, ``j``, ``point``, ``normal``, ``fn``, ``ft``)."""
         k = range(self.n_frames)[k]
-        with h5py.File(self.path, "r") as h:
+        with _open_h5(self.path) as h:
             g = h["contacts"][str(k)]
             return {key: g[key][()] for key in g}
 
     def wall(self, name: str):
         """Time series of one wall as a DataFrame (time, position_x, …, force_z, torque_z …)."""
-        with h5py.File(self.path, "r") as h:
+        with _open_h5(self.path) as h:
             return _group_table(h["walls"][name])
 
     @property
@@ -452,6 +452,41 @@ class Frames:
     def to_vtk(self, k: int, path):
         """Write frame k as a VTK file for ParaView."""
         return self[k].to_vtk(path)
+
+
+class FramesError(ValueError):
+    """A frames.h5 that cannot be read (truncated, damaged, not HDF5, not in this format)."""
+
+
+class _open_h5:
+    """``h5py.File(path, "r")`` whose read errors (a truncated or damaged file, a missing group)
+    become a :class:`FramesError` naming the file and the fix."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+
+    def __enter__(self):
+        try:
+            self.h = h5py.File(self.path, "r")
+        except OSError as exc:
+            raise FramesError(self._msg(exc)) from None
+        return self.h
+
+    def __exit__(self, typ, exc, tb):
+        self.h.close()
+        # h5py's read errors: OSError/RuntimeError for damaged data, KeyError "Unable to ..." for a
+        # group or dataset a truncated file lacks (a KeyError of this module's own API passes)
+        damaged = isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, FileNotFoundError) or \
+            isinstance(exc, KeyError) and "Unable to" in str(exc)
+        if damaged:
+            raise FramesError(self._msg(exc)) from None
+        return False
+
+    def _msg(self, exc) -> str:
+        size = self.path.stat().st_size if self.path.exists() else 0
+        return (f"{self.path}: not a readable frames file ({size} bytes; {str(exc).splitlines()[0][:160]}): it is "
+                f"truncated or damaged. Run the case again (`orchestrator run CASE` checks a run's files and "
+                f"resumes or redoes a damaged one) or write it again from its source")
 
 
 def load(path) -> Frames:

@@ -29,6 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .case import CaseError
+from .frames import Frames
+from .particles_io import read_particle_table, write_particle_table
+
 #: accepted overlap of a scanned grain with a wall, as a fraction of its radius. It must cover
 #: the CT equivalent radius of grains in a dense packing, which runs large: +5.7 % on the compare
 #: tests' synthetic scans (3 um voxels, 8-17 voxels across, PSF 0.7 voxel), where contact necks go
@@ -47,7 +51,6 @@ def _frames_path(ip) -> Path:
 
 def load_packing(ip) -> dict:
     """``{"id", "radius", "position"}`` of the grains present in frame ``ip.frame`` of ``ip.frames``."""
-    from .frames import Frames
     fr = Frames(_frames_path(ip))
     k = range(fr.n_frames)[ip.frame]
     pos = fr.position[k]
@@ -73,7 +76,6 @@ def packing_digest(ip) -> str:
 
 def check_initial_packing(case, params, pk) -> None:
     """Raise CaseError when a grain lies outside the scene's container."""
-    from .case import CaseError
     sc = params["scene"]
     x, r = pk["position"], pk["radius"]
     # a scanned grain may press into a wall a little (equivalent radius, centroid error, load)
@@ -118,7 +120,6 @@ def apply_initial_packing(case, params, run_dir) -> dict | None:
     ip = getattr(case, "initial_packing", None)
     if ip is None:
         return None
-    from .particles_io import write_particle_table
     pk = load_packing(ip)
     check_initial_packing(case, params, pk)
     write_particle_table(Path(run_dir) / "particles.txt", pk["id"], pk["radius"], case.material.density,
@@ -131,8 +132,6 @@ def apply_initial_packing(case, params, run_dir) -> dict | None:
 
 def verify_written(case, run_dir, info) -> None:
     """After the scene's prepare: particles.txt must still be the packing (else the scene ignored it)."""
-    from .case import CaseError
-    from .particles_io import read_particle_table
     t = read_particle_table(Path(run_dir) / "particles.txt")
     pk = info.pop("_radii", None)
     if len(t["id"]) != info["grains"] or (pk is not None and not np.allclose(np.sort(t["radius"]), pk)):

@@ -7,8 +7,11 @@ file is written under a temporary name and renamed.
 """
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
+import os
+import sys
 import shutil
 import time
 from dataclasses import dataclass
@@ -16,23 +19,17 @@ from pathlib import Path
 
 import yaml
 
-from engines import get_engine
 from engines.base import EngineError
 from engines.render import templates_hash
 
 from .atomic import write_json, write_text
 from .case import Case
 from .derive import derive
-from .particles_io import write_particle_table
-
-#: measured single-core throughput [particle-steps/s] used for run-time estimates when no
-#: benchmark result is stored (ENGINES.md: 2000 dense Hertz spheres on this machine).
-#: LAMMPS: LIGGGHTS' figure times the ratio measured on plane_shear_smoke (150 grains, 17 391 steps,
-#: both engines' loop times in one session: 7.13e5 / 6.98e5 particle-steps/s = 1.02; docs/lammps.md)
-DEFAULT_THROUGHPUT = {"liggghts": 6e6, "yade": 1.5e6, "lammps": 6e6}
-#: process start-up and set-up [s] measured on this machine (tiny verification cases: total engine
-#: time minus the engines' own loop time)
-DEFAULT_STARTUP = {"liggghts": 0.5, "yade": 2.0, "lammps": 0.5}   # LAMMPS: 1.03 s vs LIGGGHTS 1.22 s, same session
+from .frames import Frames
+from .initial_packing import apply_initial_packing, packing_digest, verify_written
+from .registry import get_engine, get_scene
+from .resources import data_file
+from .stability.monitors import read_verdict
 
 
 @dataclass
@@ -44,7 +41,6 @@ class RunOutcome:
 
     @property
     def frames(self):
-        from .frames import Frames
         return Frames(self.run_dir / "frames.h5")
 
 
@@ -63,7 +59,6 @@ def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | N
     h.update(engine_version.encode())
     h.update(templates_hash(engine_name, case.scene.kind).encode())
     if getattr(case, "initial_packing", None) is not None:
-        from .initial_packing import packing_digest
         h.update(packing_digest(case.initial_packing).encode())
     return h.hexdigest()[:12]
 
@@ -74,44 +69,71 @@ def run_dir_for(case: Case, engine_name: str, runs_root="runs") -> Path:
 
 
 def read_summary(run_dir) -> dict | None:
+    """The run's summary.json; a run found ``running`` whose lock no live process holds (its
+    orchestrator was killed) is marked ``interrupted`` on disk and in the answer."""
     p = Path(run_dir) / "summary.json"
     if not p.exists():
         return None
-    return json.loads(p.read_text())
+    try:
+        s = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return {"status": "interrupted", "error": f"{p}: unreadable (cut short); the run is resumed or redone"}
+    if s.get("status") == "running" and not _lock_held(Path(run_dir)):
+        s["status"] = "interrupted"
+        s["interrupted"] = {"found": time.strftime("%Y-%m-%dT%H:%M:%S"), "pid": s.get("pid"),
+                            "note": "found 'running' with no live owner (its process was killed)"}
+        try:
+            write_json(p, s)
+        except OSError:                  # a read-only run directory: report it, leave the file
+            pass
+    return s
+
+
+def _lock_held(run_dir: Path) -> bool:
+    """True when some live process holds the run directory's lock (flock: released by the kernel
+    when its owner dies, so a stale lock file is never held)."""
+    import fcntl
+    lock = run_dir / ".lock"
+    if not lock.exists():
+        return False
+    try:
+        fh = open(lock, "r")
+    except OSError:
+        return False
+    with fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fh, fcntl.LOCK_UN)
+    return False
 
 
 def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     """Engine wall time [s] estimated from the derived step count, particle count and the
-    engine's throughput (benchmarks/throughput.json when measured, else ENGINES.md figures)."""
-    tp = dict(DEFAULT_THROUGHPUT)
-    stored = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.json"
-    if stored.exists():
-        tp.update(json.loads(stored.read_text()))
+    engine's throughput (benchmarks/throughput.json, shipped as package data, when measured; else
+    the adapter's own figures, :attr:`engines.base.Engine.throughput`)."""
+    eng = get_engine(engine_name)
+    tp = eng.throughput
+    stored = data_file("benchmarks/throughput.json")
+    if stored.is_file():
+        tp = json.loads(stored.read_text()).get(engine_name, tp)
     sc = params["scene"]
     n = sc.get("n", len(sc.get("ids", [])))
     steps = sc.get("total_steps", sc["steps"])
-    ranks = case.engine_options.mpi_ranks if engine_name in ("liggghts", "lammps") else case.engine_options.threads
-    return DEFAULT_STARTUP[engine_name] + steps * max(n, 1) / (tp[engine_name] * ranks)
+    return eng.startup + steps * max(n, 1) / (tp * eng.workers(case))
 
 
 def prepare(case: Case, engine_name: str, run_dir: Path, params: dict | None = None) -> tuple[dict, list]:
     """Derive parameters (unless given), check capabilities, write case/params/particles.
     Returns (params, subs)."""
-    from .scenes import scene_module
     eng = get_engine(engine_name)
     params = derive(case) if params is None else params
     subs = eng.check(params["features"], case.contact.substitutes)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
-    mod = scene_module(case.scene.kind)
-    from .initial_packing import apply_initial_packing, verify_written
     packing = apply_initial_packing(case, params, run_dir)      # None without case.initial_packing
-    if hasattr(mod, "prepare"):
-        params["files"] = mod.prepare(case, params, run_dir) or {}
-    elif not (run_dir / "particles.txt").exists():
-        sc = params["scene"]
-        write_particle_table(run_dir / "particles.txt", sc["ids"], sc["radius"], case.material.density,
-                             sc["position"], sc.get("velocity"))
+    params["files"] = get_scene(case.scene.kind).prepare(case, params, run_dir) or {}
     if packing is not None:
         verify_written(case, run_dir, packing)
         params["initial_packing"] = packing
@@ -129,43 +151,65 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     version = eng.version()
     params = derive(case)
     run_dir = Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, version, params)}"
-    old = read_summary(run_dir)
-    if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force and not dry_run:
-        if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
-            with _RunLock(run_dir):               # the run is reused; its analyses are (re)done
-                t0 = time.perf_counter()
+    if dry_run:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        with _RunLock(run_dir):
+            return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
+    if force and run_dir.exists():
+        if _lock_held(run_dir):
+            raise EngineError(f"{run_dir} is being run by another process; wait for it or stop it before --force")
+        shutil.rmtree(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    # under the lock (waiting for a process that runs the same case: its result is then reused)
+    with _RunLock(run_dir, wait=True):
+        old = read_summary(run_dir)
+        if old and old.get("status") == "complete" and not force:
+            from .integrity import verify_run
+            damaged = verify_run(run_dir, old)
+            if any(not name.startswith("analysis") for name, _ in damaged):
+                _say(f"{run_dir}: the complete run is damaged, so it is redone: "
+                     + "; ".join(msg for _, msg in damaged))
+                old = dict(old, status="damaged", damaged=[m for _, m in damaged])
+                _clear_results(run_dir)
+            elif damaged:
+                _say(f"{run_dir}: analysis outputs damaged, so the analyses are redone: "
+                     + "; ".join(msg for _, msg in damaged))
+                old["analysis_specs"] = None
+        if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force:
+            if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
+                t0 = time.perf_counter()              # the run is reused; its analyses are (re)done
                 old["analysis"] = run_case_analyses(case, run_dir)
                 old["analysis_specs"] = case.analysis
                 old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
+                from .integrity import run_record
+                old["integrity"] = run_record(run_dir, old["analysis"])
                 write_json(run_dir / "summary.json", old)
-        return RunOutcome(run_dir, "complete", old, reused=True)
-    if old and old.get("status") == "unstable" and not force and not dry_run:
-        return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
-    if force and run_dir.exists():
-        shutil.rmtree(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    with _RunLock(run_dir):
+            return RunOutcome(run_dir, "complete", old, reused=True)
+        if old and old.get("status") == "unstable" and not force:
+            return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
         return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
 
 
 class _RunLock:
     """An exclusive lock on a run directory (flock), so two processes never drive one run."""
 
-    def __init__(self, run_dir: Path):
+    def __init__(self, run_dir: Path, wait: bool = False):
         self.path = run_dir / ".lock"
+        self.wait = wait
 
     def __enter__(self):
-        import fcntl
         self.fh = open(self.path, "w")
         try:
             fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            self.fh.close()
-            raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+            if not self.wait:
+                self.fh.close()
+                raise EngineError(f"{self.path.parent} is being run by another process; wait for it or stop it") from None
+            _say(f"{self.path.parent} is being run by another process; waiting for it (its result is then reused)")
+            fcntl.flock(self.fh, fcntl.LOCK_EX)
         return self
 
     def __exit__(self, *exc):
-        import fcntl
         fcntl.flock(self.fh, fcntl.LOCK_UN)
         self.fh.close()
 
@@ -192,7 +236,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
                                                           "forced")} if "stability" in params else None,
         "estimated_engine_time_s": estimate,
         "substitutions": [s.as_dict() for s in subs],
-        "wall_time": timings, "resumed_from": resume,
+        "wall_time": timings, "resumed_from": resume, "pid": os.getpid(),
     }
     if dry_run:
         write_json(run_dir / "summary.json", summary)
@@ -200,7 +244,6 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     write_json(run_dir / "summary.json", summary)
     progress = case.engine_options.progress if progress is None else progress
     t1 = time.perf_counter()
-    from .stability.monitors import read_verdict
     try:
         res, resume = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress)
         summary["resumed_from"] = resume
@@ -240,6 +283,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         timings["analysis"] = time.perf_counter() - t3
     timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop"))
     summary["wall_time"] = timings
+    from .integrity import run_record
+    summary["integrity"] = run_record(run_dir, summary.get("analysis"))
     write_json(run_dir / "summary.json", summary)
     # only now, with the complete summary on disk, are the resume points no longer needed
     summary["resume_points_removed_bytes"] = drop_resume_points(run_dir)
@@ -247,12 +292,31 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     return RunOutcome(run_dir, "complete", summary)
 
 
+def _say(msg: str) -> None:
+    """A note for the user on stderr (the runner has no console of its own)."""
+    print(f"note: {msg}", file=sys.stderr)
+
+
+def _clear_results(run_dir: Path) -> None:
+    """Empty a damaged complete run's directory (all but its lock, which the caller holds) so that
+    it is redone from the start: its resume points were dropped when it completed, and what is left
+    of its engine output must not mix into the new run."""
+    for f in run_dir.iterdir():
+        if f.name == ".lock":
+            continue
+        if f.is_dir() and not f.is_symlink():
+            shutil.rmtree(f, ignore_errors=True)
+        else:
+            f.unlink(missing_ok=True)
+
+
 def drop_resume_points(run_dir: Path) -> int:
     """Delete a complete run's LIGGGHTS restart files and YADE checkpoints (a complete run is
     reused, never resumed; on the seed triaxial case they would hold ~60 x 6 MB). Returns the bytes
     freed."""
     freed = 0
-    for f in [*Path(run_dir).glob("restart/*.restart"), *Path(run_dir).glob("checkpoint*.yade.gz")]:
+    for f in [*Path(run_dir).glob("restart/*.restart"), *Path(run_dir).glob("checkpoint*.yade.gz"),
+              *Path(run_dir).glob("restart_forced_*")]:       # LIGGGHTS' own restart when killed
         try:
             freed += f.stat().st_size
             f.unlink()
@@ -279,6 +343,8 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
     total = params["scene"].get("total_steps", params["scene"]["steps"])
     timeout = case.engine_options.timeout
     candidates = (resume or {}).get("candidates", [])
+    if resume is None and hasattr(eng, "prepare_resume"):
+        eng.prepare_resume(run_dir, {"step": -1})           # a fresh start: no frame segment of an older try
     for cand in candidates[1:] + [None]:
         try:
             return eng.run(deck, case, total, log, timeout, progress), resume
@@ -289,19 +355,17 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
             resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand,
                                                     step=_restart_step(cand, resume))
             resume = _scene_resume(case, eng.name, run_dir, resume)
-            if resume is not None and hasattr(eng, "prepare_resume"):
-                eng.prepare_resume(run_dir, resume)
+            if hasattr(eng, "prepare_resume"):
+                eng.prepare_resume(run_dir, resume or {"step": -1})
             deck = eng.render(case, params, run_dir, resume=resume)
     raise EngineError("unreachable")  # pragma: no cover
 
 
 def _scene_resume(case, engine_name: str, run_dir: Path, resume: dict | None) -> dict | None:
-    """Let the scene check and complete the engine's resume point (``resume_point(engine, run_dir,
-    resume)`` in the scene module: e.g. the stage state a deck needs to re-enter the right stage);
-    it may return None (start afresh) and tidies the run directory for the chosen point."""
-    from .scenes import scene_module
-    hook = getattr(scene_module(case.scene.kind), "resume_point", None)
-    return hook(engine_name, Path(run_dir), resume) if hook else resume
+    """Let the engine check and complete its resume point for the case's scene
+    (:meth:`engines.base.Engine.complete_resume`: e.g. the stage state a deck needs to re-enter
+    the right stage); it may return None (start afresh) and tidies the run directory."""
+    return get_engine(engine_name).complete_resume(case, Path(run_dir), resume)
 
 
 def _restart_step(cand: str, resume: dict) -> int:
@@ -312,9 +376,8 @@ def _restart_step(cand: str, resume: dict) -> int:
 
 def run_case_analyses(case: Case, run_dir: Path) -> dict:
     """Run the case's ``analysis:`` list on the run's frames (orchestrator.analysis)."""
-    from .frames import Frames
     try:
-        from .analysis import run_analyses
+        from .analysis import run_analyses       # on demand: the analysis stack (scikit-image, pyvista) is heavy
     except ImportError as exc:  # analysis package not available
         return {"error": f"analysis unavailable: {exc}"}
     return run_analyses(Frames(run_dir / "frames.h5"), case.analysis, run_dir / "analysis")

@@ -12,14 +12,19 @@ of every impact, and :func:`verification_table` sets them beside the analytic va
 """
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .case import load_case
 from .derive import (hertz_contact_time, hertz_max_overlap, hertz_peak_force,
                      sliding_limit_tangential_restitution, sliding_threshold_angle)
+from .frames import Frames
+from .registry import engine_names
+from .runner import run_case
 
 REPO = Path(__file__).resolve().parents[1]
 VERIFICATION_DIR = REPO / "cases" / "verification"
@@ -115,13 +120,11 @@ def verification_cases() -> list[Path]:
     return sorted(p for p in VERIFICATION_DIR.glob("*.yaml") if not p.name.startswith("_"))
 
 
-def run_verification(engines=("liggghts", "yade", "lammps"), cases=None, runs_root="runs", force=False,
+def run_verification(engines=None, cases=None, runs_root="runs", force=False,
                      progress=False) -> pd.DataFrame:
-    """Run every verification case on every engine; return the long verification table."""
-    from .case import load_case
-    from .frames import Frames
-    from .runner import run_case
-    import json
+    """Run every verification case on every engine (default: every installed engine); return the
+    long verification table."""
+    engines = engine_names() if engines is None else engines
     tables = []
     for path in cases or verification_cases():
         case = load_case(path)

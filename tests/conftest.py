@@ -19,8 +19,8 @@ def runs_root(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def engines_installed():
-    from engines import ENGINE_NAMES, get_engine
-    missing = [e for e in ENGINE_NAMES if not get_engine(e).available()]
+    from engines import engine_names, get_engine
+    missing = [e for e in engine_names() if not get_engine(e).available()]
     if missing:
         pytest.fail(f"engine(s) not installed: {missing}; run `bash .ci/setup` (README)")
     return True

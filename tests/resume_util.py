@@ -11,12 +11,14 @@ from pathlib import Path
 
 def kill_run(proc: subprocess.Popen, run_dir: Path) -> None:
     """Kill an ``orchestrator run`` started with ``start_new_session=True`` (its engine dies with it
-    through PDEATHSIG) and check the run is left interrupted: status ``running``, no frames.h5."""
+    through PDEATHSIG) and check the run is left interrupted: ``running`` on disk, read as
+    ``interrupted`` (no live process holds its lock), no frames.h5."""
     os.killpg(proc.pid, signal.SIGKILL)                 # the orchestrator dies...
     proc.wait()
     time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
-    summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["status"] == "running"
+    assert json.loads((run_dir / "summary.json").read_text())["status"] == "running"    # as it was killed
+    from orchestrator.runner import read_summary
+    assert read_summary(run_dir)["status"] == "interrupted"       # no live owner: read as interrupted
     assert not (run_dir / "frames.h5").exists()
 
 

@@ -48,16 +48,13 @@ def test_engines_lists_versions_and_capabilities(engines_installed):
     assert "membrane" in out.stdout and "substitute" in out.stdout
 
 
-@pytest.mark.engine
-def test_dry_run_renders_and_estimates(tmp_path, engines_installed):
-    out = cli("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path)
+def test_dry_run_sizes_without_work(tmp_path):
+    """--dry-run prints each engine's particles, steps, memory and engine time, and does no work:
+    no packing, no run directory (issue #16; decks are rendered by run_case(dry_run=True))."""
+    out = cli("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path / "runs")
     assert out.returncode == 0, out.stderr
-    assert out.stdout.count("rendered") == 3 and "estimated engine time" in out.stdout
-    decks = list(tmp_path.glob("chung_ooi_4_oblique/liggghts-*/deck.in")) + \
-        list(tmp_path.glob("chung_ooi_4_oblique/yade-*/script.py")) + \
-        list(tmp_path.glob("chung_ooi_4_oblique/lammps-*/deck.in"))
-    assert len(decks) == 3
-    assert not list(tmp_path.glob("**/frames.h5"))
+    assert out.stdout.count("17 particles") == 3 and out.stdout.count("engine time") == 3
+    assert not (tmp_path / "runs").exists()
 
 
 @pytest.mark.engine

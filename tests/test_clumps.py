@@ -160,6 +160,7 @@ def test_liggghts_templates_keep_the_shape_mix_and_the_solid_volume():
             assert C["classes"][0]["diameter"] == pytest.approx(np.mean(d ** 3) ** (1 / 3), rel=1e-12)
 
 
+@pytest.mark.engine
 def test_liggghts_triaxial_with_clumps(tmp_path):
     """A short LIGGGHTS triaxial run on inserted clumps (100 grains, 3 isotropic chunks at most, 1 %
     axial strain): every clump inserted with its template's members, the members of every clump keep
@@ -239,6 +240,7 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
         assert np.max(pos[kk][:, 2] + r) < zt[w] + 0.05 * smallest
 
 
+@pytest.mark.engine
 def test_liggghts_incomplete_insertion_stops_with_a_clear_error(tmp_path):
     """One insertion attempt per clump leaves most of them out: the deck stops right after the
     insertion and the error names the fix, the counts and the case fields to change."""
@@ -259,6 +261,7 @@ def _report(path):
     return {int(x[0]): (float(x[1]), np.array([float(v) for v in x[2:5]]), [int(v) for v in x[5:]]) for x in rows}
 
 
+@pytest.mark.engine
 def test_yade_triaxial_with_clumps(tmp_path):
     """A short triaxial run (2 isotropic chunks at most, 1 % axial strain) on clumps: every clump
     keeps its mass and inertia, its members keep their distances in every frame, and YADE's mass

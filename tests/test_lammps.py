@@ -15,7 +15,7 @@ from engines.lammps.adapter import Lammps, find_lmp
 from engines.lammps.dump import dump_columns_in, read_binary_dump, scan, truncate_binary_dump
 from engines.lammps.numbers import (lammps_numbers, restitution_damping, seed_gamma_n,
                                     tangential_damping_factor, viscoelastic_eta, wall_young)
-from engines.liggghts import read_dump
+from engines.lammps_dump import read_dump
 from orchestrator.derive import effective_modulus, effective_shear_modulus
 
 
@@ -133,6 +133,16 @@ def test_stress_output_is_refused_with_the_field_named(tmp_path):
         Lammps().render(case, {}, tmp_path)                   # refused before any number is read
 
 
+def test_a_case_naming_no_engines_runs_where_a_deck_exists():
+    """Default engines: every installed engine with a deck for the scene (LAMMPS has no shear-cell
+    or triaxial deck); engines a case names are kept."""
+    from orchestrator.case import load_case
+    from conftest import CASES
+    assert load_case(CASES / "shear_cell_smoke.yaml").engines == ["liggghts", "yade"]
+    assert "lammps" in load_case(CASES / "plane_shear_smoke.yaml").engines
+    assert load_case(CASES / "triaxial_smoke.yaml", overrides={"engines": ["lammps"]}).engines == ["lammps"]
+
+
 def test_numbers_for_a_verification_case():
     from orchestrator.case import load_case
     from orchestrator.derive import derive
@@ -193,23 +203,20 @@ run 21
 
 
 @pytest.mark.engine
-def test_monitor_stops_a_run_and_the_runner_marks_it_unstable(lmp, tmp_path):
+def test_monitor_stops_a_run_and_the_runner_marks_it_unstable(lmp, tmp_path, monkeypatch):
+    from orchestrator import derive as derive_module
     from orchestrator.case import load_case
     from orchestrator.runner import run_case
     from orchestrator.verify import VERIFICATION_DIR
     case = load_case(VERIFICATION_DIR / "chung_ooi_1_sphere_sphere_glass.yaml")
-    import orchestrator.stability.checks as checks
-    orig = checks.monitor_limits
+    orig = derive_module.monitor_limits
 
     def tight(case, params, report):
         m = orig(case, params, report)
         m["ke_limit"] = 1e-3 * m["ke_limit"]                          # below the initial kinetic energy
         return m
-    checks.monitor_limits = tight
-    try:
-        out = run_case(case, "lammps", runs_root=tmp_path, progress=False)
-    finally:
-        checks.monitor_limits = orig
+    monkeypatch.setattr(derive_module, "monitor_limits", tight)
+    out = run_case(case, "lammps", runs_root=tmp_path, progress=False)
     assert out.status == "unstable"
     assert "ORCH_UNSTABLE:kinetic_energy" in (out.run_dir / "engine.log").read_text()
 

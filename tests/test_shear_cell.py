@@ -223,6 +223,7 @@ def smoke_runs(tmp_path_factory):
     return case, {e: run_case(case, e, runs_root=root, progress=False) for e in ENGINES}
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("engine", ["liggghts", "yade"])
 def test_smoke_protocol(smoke_runs, engine):
     case, runs = smoke_runs
@@ -276,6 +277,7 @@ def _measured_rotation(a0, a1):
     return (d + math.pi) % (2 * math.pi) - math.pi
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("engine", ["liggghts", "yade"])
 def test_smoke_rotating_parts_turned_by_requested_angle(smoke_runs, engine):
     case, runs = smoke_runs
@@ -303,6 +305,7 @@ def test_smoke_rotating_parts_turned_by_requested_angle(smoke_runs, engine):
             assert got == pytest.approx(want, abs=tol + 1e-9), part
 
 
+@pytest.mark.engine
 def test_smoke_both_engines_start_identical(smoke_runs):
     case, runs = smoke_runs
     if len(runs) < 2:

@@ -61,6 +61,7 @@ def test_cases_validate_and_render(tmp_path):
         assert abs(p["pressure"] - 300e3) < 1e-6 and abs(p["axial_strain"] - 0.2) < 1e-12
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_isotropic_stage(runs, eng):
     out = outcome(runs, eng)
@@ -70,6 +71,7 @@ def test_isotropic_stage(runs, eng):
     assert abs(iso["stress_ratio"] - 1) <= 0.05, iso
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_axial_loading(runs, eng):
     out = outcome(runs, eng)
@@ -87,6 +89,7 @@ def test_axial_loading(runs, eng):
         assert subs.get("membrane") == "shell_pressure"
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_preparation_friction_then_contact_friction(runs, eng):
     """Stage 1 prepares the sample with ``isotropic.friction`` (0.1 in the smoke case, a denser
@@ -114,6 +117,7 @@ def test_preparation_friction_then_contact_friction(runs, eng):
     assert 0.6 * mu <= q90["load"] <= 1.1 * mu, q90
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_volumetric_strain_two_ways(runs, eng):
     out = outcome(runs, eng)
@@ -127,6 +131,7 @@ def test_volumetric_strain_two_ways(runs, eng):
     assert diff <= 0.02, f"{eng}: volumetric strain boundary vs hull differ by up to {diff:.4f}"
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_no_grain_escapes(runs, eng):
     out = outcome(runs, eng)
@@ -156,6 +161,7 @@ def test_no_grain_escapes(runs, eng):
             assert inside.all(), f"frame {k}: {np.sum(~inside)} grain(s) outside the membrane"
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_frame_outputs(runs, eng):
     """Rotations (YADE), particle stress and contact lists in every frame, signs as documented."""
@@ -202,6 +208,7 @@ def test_monitor_deck_has_one_pair_local_compute(tmp_path):
     assert "orch_monitor_engine()," in (yade.run_dir / "script.py").read_text()
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_monitors_stop_an_unstable_triaxial_run(eng, tmp_path):
     """The stability monitors are wired into both triaxial decks: the smoke case at 5x the
@@ -221,6 +228,7 @@ def test_monitors_stop_an_unstable_triaxial_run(eng, tmp_path):
     assert not (out.run_dir / "frames.h5").exists()
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_monitors_watch_the_smoke_runs(runs, eng):
     """The monitors ran during the smoke runs (LIGGGHTS echoes each check) and nothing tripped."""
@@ -246,11 +254,13 @@ def yade_seed2(tmp_path_factory):
                     runs_root=tmp_path_factory.mktemp("triaxial_seed2"), progress=False)
 
 
+@pytest.mark.engine
 def test_yade_lateral_stray_second_packing(yade_seed2):
     sh = yade_seed2.summary["scene"]["shear"]
     assert sh["sigma3_error_max_abs_smoothed"] <= 0.10, sh
 
 
+@pytest.mark.engine
 def test_yade_volume_two_ways_second_packing(yade_seed2):
     with h5py.File(yade_seed2.run_dir / "frames.h5") as f:
         fr = f["frames"]

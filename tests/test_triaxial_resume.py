@@ -39,7 +39,7 @@ def orchestrator(*args):
 def _loading_resume_point(engine: str, run_dir: Path) -> int | None:
     """Step of a resume point written after the loading started, once one exists."""
     if engine == "liggghts":
-        from orchestrator.scenes.triaxial import read_restart_states
+        from engines.liggghts.triaxial import read_restart_states
         states = read_restart_states(run_dir)
         loading = [s for s, st in states.items() if st["stage"] == 2 and s > st["shear_start"]
                    and (run_dir / "restart" / f"state.{s}.restart").exists()]

@@ -1,9 +1,20 @@
-"""The triaxial scene's choice of a LIGGGHTS resume point (no engine): a restart file is used only
-with its line of restart/state.txt, the newest such one wins, the series and state lines after it
-are cut, and without any the run starts afresh with the stale restart files removed."""
+"""LIGGGHTS' choice of a triaxial resume point (no engine run): a restart file is used only with
+its line of restart/state.txt, the newest such one wins, the series and state lines after it are
+cut, and without any the run starts afresh with the stale restart files removed. The choice lives
+in the LIGGGHTS package (engines/liggghts/triaxial.py) and is reached through the adapter."""
 from __future__ import annotations
 
-from orchestrator.scenes.triaxial import read_restart_states, resume_point
+from pathlib import Path
+
+from engines.liggghts.triaxial import read_restart_states
+from orchestrator.case import load_case
+from orchestrator.registry import get_engine
+
+CASE = load_case(Path(__file__).resolve().parents[1] / "cases" / "triaxial_smoke.yaml")
+
+
+def resume_point(engine, rd, resume):
+    return get_engine(engine).complete_resume(CASE, rd, resume)
 
 
 def _run_dir(tmp_path, steps_with_files, state_lines, series_steps):

@@ -12,7 +12,23 @@ def test_smoothing_window():
     assert smoothing_rows(55) == 5
     assert smoothing_rows(100) == 10
     assert smoothing_rows(5000) == 10
-    np.testing.assert_allclose(running_mean(np.arange(5.0), 2), [0.5, 1.5, 2.5, 3.5])
+    # centred, every window full length (shifted inwards at the ends)
+    np.testing.assert_allclose(running_mean(np.arange(5.0), 2), [0.5, 0.5, 1.5, 2.5, 3.5])
+    np.testing.assert_allclose(running_mean(np.arange(5.0), 3), [1.0, 1.0, 2.0, 3.0, 3.0])
+    np.testing.assert_allclose(running_mean(np.arange(3.0), 10), [1.0, 1.0, 1.0])
+
+
+def test_one_running_mean_for_the_scene_summary_and_the_analysis():
+    """The summary's smoothed figures and the triaxial analysis use one running mean
+    (orchestrator.numerics): its extremes are those of every run of w consecutive rows, i.e. of the
+    'valid' convolution the scene used before, so the scene's figures did not change."""
+    rng = np.random.default_rng(3)
+    for n, w in ((100, 10), (37, 5), (4, 10), (12, 1)):
+        x = rng.standard_normal(n)
+        valid = np.convolve(x, np.ones(w) / w, mode="valid") if n >= w else np.array([x.mean()])
+        m = running_mean(x, w)
+        assert len(m) == n
+        np.testing.assert_allclose([m.max(), m.min()], [valid.max(), valid.min()], rtol=1e-12)
 
 
 def test_peak_stress_ratio_ignores_a_single_noisy_row():

@@ -81,6 +81,7 @@ def run(tmp_path, visco_elastic: bool, roll: bool = False) -> dict:
     return json.loads(line[0][7:])
 
 
+@pytest.mark.engine
 @pytest.mark.usefixtures("engines_installed")
 def test_wall_contacts_lose_adhesion_particle_pairs_keep_it(tmp_path):
     on, off = run(tmp_path, False), run(tmp_path, True)
@@ -94,6 +95,7 @@ def test_wall_contacts_lose_adhesion_particle_pairs_keep_it(tmp_path):
     assert off["wall_max"] < 0.05 * delta_eq, (off, delta_eq)
 
 
+@pytest.mark.engine
 @pytest.mark.usefixtures("engines_installed")
 def test_wall_contacts_have_no_rolling_resistance(tmp_path):
     on, off = run(tmp_path, False, roll=True), run(tmp_path, True, roll=True)

@@ -153,9 +153,8 @@ def frame_pairs(frames, pairs=None, interval=None, start=None, control=None, str
 # ----------------------------------------------------------------------------- atomic output
 
 def _tmp_in(path: Path, suffix: str):
-    fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=suffix, dir=path.parent)
-    os.close(fd)
-    return Path(tmp)
+    from ..atomic import temp_file          # its mode follows the umask (mkstemp's 0600 would not)
+    return temp_file(path, suffix)
 
 
 def atomic_write_csv(df: pd.DataFrame, path) -> Path:

@@ -49,6 +49,16 @@ def cmd_compare(args) -> int:
     opts = _parse_options(args.option)
     if args.states:
         opts["states"] = args.states
+    diffs, kinds = case_differences(args.a, args.b)
+    if diffs and len(kinds) > 1 and not args.different_cases:
+        print(f"error: {args.a} and {args.b} are runs of different scenes ({' vs '.join(kinds)}); nothing in them "
+              "matches state by state. Differences: " + "; ".join(diffs[:8])
+              + ". Compare runs of one case (on two engines), or give --different-cases to compare anyway",
+              file=sys.stderr)
+        return 2
+    if diffs:
+        print(f"warning: {args.a} and {args.b} are runs of different cases: " + "; ".join(diffs[:8])
+              + (f" (and {len(diffs) - 8} more)" if len(diffs) > 8 else ""), file=sys.stderr)
     out = Path(args.out) if args.out else Path("compare") / f"{Path(args.a).name}__vs__{Path(args.b).name}"
     cmp = compare(args.a, args.b, out_dir=out, measures=args.measure, options=opts, control=args.control,
                   tolerance=args.tolerance, frame=args.frame, identity=not args.no_identity,
@@ -58,10 +68,79 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def cmd_ladder(args, con) -> int:
+    """``orchestrator crossval CASE --ladder``: the physics ladder on every engine and seed."""
+    from rich.table import Table
+    from .ladder import run_ladder
+
+    def progress(row):
+        con.print(f"  {row['rung']} {row['engine']} seed {row['seed']}: {row['status']}"
+                  + (f" ({row['error']})" if row.get("error") else ""))
+
+    res = run_ladder(args.case, engines=args.engine, seeds=args.seeds, runs_root=args.runs,
+                     scheduler=args.scheduler, workers=args.workers, out_dir=args.out, progress=progress,
+                     rungs=args.rung)
+    t = Table(title=f"cross-validation ladder: {res.case} (A vs B per row; scatter = 2 sem of the seeds, relative)")
+    for col in ("rung", "engines", "observable", "A", "B", "|A−B|/mean", "scatter", "floor", "ok"):
+        t.add_column(col, no_wrap=True)
+    for _, r in res.comparison.iterrows():
+        if r["observable"] == "density_profile":
+            a = b = "profile"
+        else:
+            a, b = f"{r['mean A']:.4g}", f"{r['mean B']:.4g}"
+        ok = "" if r["ok"] is None or r["ok"] != r["ok"] else ("[green]ok[/green]" if r["ok"] else "[red]no[/red]")
+        floor = "" if r["floor"] is None or r["floor"] != r["floor"] else f"{r['floor']:.3g}"
+        t.add_row(r["rung"], r["engines"], r["observable"], a, b, f"{100 * r['relative difference']:.1f} %",
+                  f"{100 * r['scatter (2 sem, relative)']:.1f} %", floor, ok)
+    if not con.is_terminal:
+        con.width = max(con.width, 150)       # a log keeps every column whole
+    con.print(t)
+    con.print(f"engines part at: {res.parts_at or 'no rung (every difference within its floor or the scatter)'}")
+    if len(res.explanation):
+        con.print(res.explanation.to_string(index=False))
+    con.print("wrote " + ", ".join(res.files.values()))
+    return 0
+
+
+#: case fields that do not change what a run simulates (how it is launched, what is done after)
+_NOT_PHYSICS = ("name", "description", "engines", "engine_options", "analysis", "ct")
+
+
+def case_differences(a, b) -> tuple[list[str], list[str]]:
+    """The fields (dotted paths) in which the simulated cases of two sources differ, and their scene
+    kinds; empty when either is not a simulation (a CT frame set) or carries no case."""
+    from ..frames import Frames
+    cases = []
+    for src in (a, b):
+        try:
+            meta = Frames(src).meta
+        except (FileNotFoundError, ValueError, OSError):
+            return [], []
+        case = meta.get("case")
+        if meta.get("source") != "simulation" or not isinstance(case, dict):
+            return [], []
+        cases.append(case)
+    out: list[str] = []
+
+    def walk(x, y, path):
+        if isinstance(x, dict) and isinstance(y, dict):
+            for k in sorted(set(x) | set(y)):
+                if not path and k in _NOT_PHYSICS:
+                    continue
+                walk(x.get(k), y.get(k), f"{path}.{k}" if path else k)
+        elif x != y:
+            out.append(f"{path}: {x!r} vs {y!r}" if len(repr(x)) + len(repr(y)) < 80 else f"{path} differs")
+    walk(cases[0], cases[1], "")
+    kinds = sorted({str((c.get("scene") or {}).get("kind")) for c in cases})
+    return out, kinds
+
+
 def cmd_crossval(args) -> int:
     from rich.console import Console
     from .crossval import crossval
     con = Console()
+    if args.ladder:
+        return cmd_ladder(args, con)
     conc = {"auto": "auto", "yes": True, "no": False}[args.concurrent]
     opts = _parse_options(args.option)
     if args.states:
@@ -96,6 +175,7 @@ def add_parsers(sub) -> None:
     c.add_argument("--tolerance", type=float, help="largest control difference of matched states (SI)")
     c.add_argument("--frame", choices=["none", "centroid", "rigid"], default="none",
                    help="coordinate alignment of B onto A (default none: same world frame)")
+    c.add_argument("--different-cases", action="store_true", help="compare runs of different scenes anyway")
     c.add_argument("--no-identity", action="store_true", help="skip grain identity and the grain-by-grain errors")
     c.add_argument("--max-distance", type=float, help="position-matching cut-off [m] (default d50/2)")
     c.add_argument("--atol", type=float, default=0.1, help="displacement agreement: absolute tolerance [d50]")
@@ -115,6 +195,14 @@ def add_parsers(sub) -> None:
     x.add_argument("--measure", action="append", choices=MEASURES)
     x.add_argument("--states", choices=["ends", "all"])
     x.add_argument("--option", action="append", metavar="MEASURE.KEY=VALUE")
+    x.add_argument("--ladder", action="store_true", help="the physics ladder L0 (Hertz-Mindlin + Coulomb) .. L4 "
+                   "(full case) on every engine and seed, with run-to-run scatter (docs/crossval.md)")
+    x.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="packings per rung and engine (--ladder)")
+    x.add_argument("--rung", action="append", choices=["L0", "L1", "L2", "L3", "L4"],
+                   help="run only this rung (repeatable; --ladder; default every rung the case has)")
+    x.add_argument("--engine", action="append", help="engine for --ladder (repeatable; default the case's engines)")
+    x.add_argument("--scheduler", help="Dask scheduler address for --ladder (default: local processes)")
+    x.add_argument("--workers", type=int, help="local worker processes for --ladder (default one per core)")
     x.set_defaults(func=cmd_crossval)
 
     r = sub.add_parser("report", help="self-contained HTML page of one run (case, substitutions, checks, "
@@ -126,7 +214,3 @@ def add_parsers(sub) -> None:
     r.add_argument("--rerun", action="store_true", help="recompute analyses already in RUN/analysis")
     r.set_defaults(func=cmd_report)
 
-
-if __name__ == "__main__":  # pragma: no cover
-    from ..cli import main
-    sys.exit(main(sys.argv[1:]))

@@ -17,13 +17,14 @@ from pathlib import Path
 
 import pandas as pd
 
+from engines.base import EngineError
+
 from ..case import Case, load_case
+from ..registry import engine_names
 from ..runner import RunOutcome, run_case
 from .core import Comparison, compare
 
 __all__ = ["CrossValidation", "crossval", "free_cores"]
-
-ENGINES = ("liggghts", "yade")
 
 
 def free_cores() -> float:
@@ -57,15 +58,16 @@ def _run_one(case, engine, runs_root, force):
 
 
 def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: bool = False,
-             measures=None, options: dict | None = None, engines=ENGINES, **compare_kw) -> CrossValidation:
-    """Run ``case`` (a Case or a YAML path) on both engines and compare them (A = first engine).
+             measures=None, options: dict | None = None, engines=None, **compare_kw) -> CrossValidation:
+    """Run ``case`` (a Case or a YAML path) on ``engines`` (default: the engines the case lists) and
+    compare them (A = first engine).
 
     Writes the comparison (CSV, HTML with each engine's wall time) into ``out_dir`` (default
     ``<runs_root>/<case>/crossval``). Other keyword arguments go to :func:`~orchestrator.compare.compare`.
     """
     if not isinstance(case, Case):
         case = load_case(case)
-    engines = list(engines)
+    engines = list(case.engines if engines is None else engines)
     missing = [e for e in engines if e not in case.engines]
     if missing:
         raise ValueError(f"case {case.name!r} lists engines {case.engines}; it cannot be cross-validated on {missing}")
@@ -89,7 +91,6 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
             runs[e], elapsed[e] = _run_one(case, e, runs_root, force)
     bad = {e: o for e, o in runs.items() if o.status != "complete"}
     if bad:
-        from engines.base import EngineError
         msg = "; ".join(f"{e}: {o.status} ({o.run_dir})" + (
             f" — {o.summary['unstable'].get('meaning', o.summary['unstable'].get('figure'))}: "
             f"{o.summary['unstable'].get('value'):.4g} > {o.summary['unstable'].get('limit')} at step "

@@ -68,8 +68,10 @@ def _fmt(v) -> str:
             return "" if np.isnan(v) else str(v)
         a = abs(v)
         return f"{v:.4g}" if (a == 0 or 1e-3 <= a < 1e5) else f"{v:.3e}"
-    if isinstance(v, (dict, list)):
-        return json.dumps(v, default=str)
+    if isinstance(v, dict):      # never a raw mapping in a cell: "key value; key value"
+        return "; ".join(f"{k} {_fmt(x)}" for k, x in v.items())
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_fmt(x) for x in v)
     return str(v)
 
 
@@ -146,15 +148,7 @@ def run_checks(run_dir, frames=None, summary: dict | None = None) -> pd.DataFram
                      "limit": u.get("limit"), "status": "FAIL", "source": f"summary.json (step {u.get('step')})"})
     stab = summary.get("stability") or summary.get("checks")
     if isinstance(stab, dict):
-        for k, v in stab.items():
-            if isinstance(v, dict):
-                ok = v.get("ok", v.get("pass"))
-                rows.append({"check": k, "value": _fmt(v.get("value", {kk: vv for kk, vv in v.items()
-                                                                        if kk not in ("ok", "pass", "limit")})),
-                             "limit": _fmt(v.get("limit", "")), "status": "info" if ok is None else ("ok" if ok else "FAIL"),
-                             "source": "summary.json stability"})
-            else:
-                rows.append({"check": k, "value": _fmt(v), "limit": "", "status": "info", "source": "summary.json"})
+        rows += _stability_rows(stab)
     for f in sorted(run_dir.glob("*_checks.json")):
         try:
             d = json.loads(f.read_text())
@@ -184,6 +178,53 @@ def run_checks(run_dir, frames=None, summary: dict | None = None) -> pd.DataFram
         rows.append({"check": "positions finite and bounded [m]", "value": f"{lo:.3g} .. {hi:.3g}", "limit": "",
                      "status": "ok" if np.isfinite([lo, hi]).all() else "FAIL", "source": "frames.h5"})
     return pd.DataFrame(rows, columns=["check", "value", "limit", "status", "source"])
+
+
+def _stability_rows(stab: dict) -> list[dict]:
+    """The pre-run time-step report as check rows: one row per critical-step limit (the limit in
+    seconds and the fraction of it the run's dt uses), the binding limit and the safe maximum.
+    No cell holds a raw mapping."""
+    rows = []
+    limits, fractions = stab.get("limits") or {}, stab.get("fractions") or {}
+    binding = stab.get("binding")
+    for name in sorted(limits, key=lambda k: -(fractions.get(k) or 0)):
+        f = fractions.get(name)
+        rows.append({"check": f"dt / {name.replace('_', ' ')} limit ({limits[name]:.3g} s)"
+                              + (" — binding" if name == binding else ""),
+                     "value": f"{f:.3f}" if isinstance(f, (int, float)) else "", "limit": "< 1",
+                     "status": "info" if f is None else ("ok" if f < 1 else "FAIL"), "source": "summary.json stability"})
+    if isinstance(stab.get("dt_max_safe"), (int, float)):
+        rows.append({"check": "largest safe time step", "value": f"{stab['dt_max_safe']:.3g} s", "limit": "",
+                     "status": "info", "source": "summary.json stability"})
+    if stab.get("forced"):
+        rows.append({"check": "time-step check overridden (--force)", "value": "yes", "limit": "", "status": "FAIL",
+                     "source": "summary.json stability"})
+    for k, v in stab.items():
+        if k in ("limits", "fractions", "binding", "dt_max_safe", "forced", "ok"):
+            continue
+        if isinstance(v, dict):
+            ok = v.get("ok", v.get("pass"))
+            val = v.get("value")
+            if val is None:
+                val = ", ".join(f"{kk} {_fmt(vv)}" for kk, vv in v.items() if kk not in ("ok", "pass", "limit"))
+            rows.append({"check": k.replace("_", " "), "value": _fmt(val), "limit": _fmt(v.get("limit", "")),
+                         "status": "info" if ok is None else ("ok" if ok else "FAIL"), "source": "summary.json stability"})
+        else:
+            rows.append({"check": k.replace("_", " "), "value": _fmt(v), "limit": "", "status": "info",
+                         "source": "summary.json"})
+    return rows
+
+
+def _results_html(run_dir) -> str:
+    """The run's key figures (orchestrator.results) with the seed paper's value beside each."""
+    from ..results import key_results
+    rows = key_results(run_dir)
+    if not rows:
+        return ""
+    df = pd.DataFrame({"quantity": [r.quantity for r in rows], "value": [r.text() for r in rows],
+                       "± means": [r.error_meaning for r in rows], "seed paper": [r.seed for r in rows],
+                       "check": ["" if r.ok is None else ("ok" if r.ok else "FAIL") for r in rows]})
+    return _table(df, {"check": _status_class})
 
 
 def _status_class(v):
@@ -235,32 +276,9 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
     title = f"Run report — {summary.get('case', case.get('name', run_dir.parent.name) if case else run_dir.name)} " \
             f"on {summary.get('engine', fr.meta.get('engine', '?'))}"
     body = []
-    info = {"run directory": str(run_dir.resolve()), "engine": f"{summary.get('engine', fr.meta.get('engine', ''))} "
-                                                            f"{summary.get('engine_version', fr.meta.get('engine_version', ''))}",
-            "status": summary.get("status", "?"), "scene": kind, "particles": fr.n_particles, "frames": fr.n_frames,
-            "fields": ", ".join(fr.fields), "controls": ", ".join(fr.controls), "walls": ", ".join(fr.wall_names),
-            "time step [s]": summary.get("dt"), "critical time step [s]": summary.get("dt_critical"),
-            "steps": summary.get("steps_run", summary.get("steps")), "source": fr.meta.get("source", "")}
-    body.append("<h2>Run</h2>" + _kv(info))
-    if fr.controls:
-        ct = pd.DataFrame({"frame": np.arange(fr.n_frames), "time [s]": fr.time, **{k: v for k, v in fr.controls.items()}})
-        if "angle" in ct:
-            ct["angle [deg]"] = np.degrees(ct.pop("angle"))
-        body.append("<details><summary>frames and control values</summary>" + _table(ct) + "</details>")
-    body.append("<h2>Substitutions</h2>" + _subs_html(summary.get("substitutions", fr.meta.get("substitutions", []) or [])))
-    chk = run_checks(run_dir, fr, summary)
-    nfail = int((chk.status == "FAIL").sum())
-    body.append(f"<h2>Stability and protocol checks</h2><p class='{'bad' if nfail else 'ok'}'>"
-                f"{'%d check(s) failed' % nfail if nfail else 'all checks passed'}</p>"
-                + _table(chk, {"status": _status_class}))
-    wt = summary.get("wall_time") or {}
-    if wt:
-        body.append("<h2>Run time</h2>" + _kv({k: (f"{v:.3f} s" if isinstance(v, (int, float)) else v) for k, v in wt.items()}))
-        body.append(_img(fig_to_data_uri(_walltime_fig(wt)), "wall-time split"))
-        if "estimated_engine_time_s" in summary:
-            body.append(f"<p class='muted'>estimated engine time before the run: "
-                        f"{summary['estimated_engine_time_s']:.3g} s</p>")
-    body.append("<h2>Analyses</h2>")
+    # results first (key figures with errors and the seed's values, then the analyses' plots),
+    # then the checks, then the bookkeeping
+    body.append("<h2>Results</h2>" + (_results_html(run_dir) or "<p class='muted'>no key figures for this scene</p>"))
     if not asum:
         body.append("<p class='muted'>No analyses asked for (the case lists none and the scene has no default set).</p>")
     for label, entry in (asum or {}).items():
@@ -268,15 +286,42 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
         if entry.get("status") != "ok":
             body.append(f"<p class='bad'>failed: {_e(entry.get('error', ''))}</p>")
             continue
-        sc = entry.get("scalars") or {}
-        if sc:
-            body.append(_kv(sc))
         for f in entry.get("files", []):
             if f.endswith(".png") and (adir / f).exists():
                 body.append(_img(_png_file_uri(adir / f), f))
+        sc = entry.get("scalars") or {}
+        if sc:
+            body.append("<details><summary>figures of this analysis</summary>" + _kv(sc) + "</details>")
         csvs = [f for f in entry.get("files", []) if f.endswith(".csv")]
         if csvs:
             body.append(f"<p class='muted'>tables: {_e(', '.join(csvs))} (in {_e(adir)})</p>")
+    chk = run_checks(run_dir, fr, summary)
+    nfail = int((chk.status == "FAIL").sum())
+    body.append(f"<h2>Stability and protocol checks</h2><p class='{'bad' if nfail else 'ok'}'>"
+                f"{'%d check(s) failed' % nfail if nfail else 'all checks passed'}</p>"
+                + _table(chk, {"status": _status_class}))
+    body.append("<h2>Substitutions</h2>" + _subs_html(summary.get("substitutions", fr.meta.get("substitutions", []) or [])))
+    dt, dtc = summary.get("dt"), summary.get("dt_critical")
+    info = {"run directory": str(run_dir.resolve()), "engine": f"{summary.get('engine', fr.meta.get('engine', ''))} "
+                                                            f"{summary.get('engine_version', fr.meta.get('engine_version', ''))}",
+            "status": summary.get("status", "?"), "scene": kind, "particles": fr.n_particles, "frames": fr.n_frames,
+            "fields": ", ".join(fr.fields), "controls": ", ".join(fr.controls), "walls": ", ".join(fr.wall_names),
+            "time step": f"{dt:.4g} s" if isinstance(dt, (int, float)) else "",
+            "critical time step": f"{dtc:.4g} s" if isinstance(dtc, (int, float)) else "",
+            "steps": summary.get("steps_run", summary.get("steps")), "source": fr.meta.get("source", "")}
+    body.append("<h2>Run</h2>" + _kv(info))
+    if fr.controls:
+        ct = pd.DataFrame({"frame": np.arange(fr.n_frames), "time [s]": fr.time, **{k: v for k, v in fr.controls.items()}})
+        if "angle" in ct:
+            ct["angle [deg]"] = np.degrees(ct.pop("angle"))
+        body.append("<details><summary>frames and control values</summary>" + _table(ct) + "</details>")
+    wt = summary.get("wall_time") or {}
+    if wt:
+        body.append("<h2>Run time</h2>" + _kv({k: (f"{v:.3f} s" if isinstance(v, (int, float)) else v) for k, v in wt.items()}))
+        body.append(_img(fig_to_data_uri(_walltime_fig(wt)), "wall-time split"))
+        if "estimated_engine_time_s" in summary:
+            body.append(f"<p class='muted'>estimated engine time before the run: "
+                        f"{summary['estimated_engine_time_s']:.3g} s</p>")
     if case_text:
         body.append("<h2>Resolved case</h2><details><summary>case.yaml</summary><pre>" + _e(case_text) + "</pre></details>")
     out = Path(out) if out else run_dir / "report.html"

@@ -194,7 +194,8 @@ def read_scan(path, voxel_size: float | None = None, origin=None, shape=None, dt
             if vol.ndim == 4 and vol.shape[-1] in (3, 4):
                 raise ScanError(f"{p}: colour (RGB) TIFF of shape {vol.shape}; a tomogram must be grey-valued")
             if vol.ndim == 2:
-                vol = vol[None]
+                raise ScanError(f"{p}: a single 2-D image of shape {vol.shape}, not a volume; give a multi-page "
+                                "TIFF, a directory of slices or a glob such as 'scan/slice_*.tif'")
         elif p.suffix.lower() == ".npy":
             try:
                 vol = np.load(p, allow_pickle=False)

@@ -142,7 +142,8 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
         lo_, hi_ = float(sm.min()), float(sm.max())
         if threshold is None and hi_ - lo_ <= 1e-6 * max(abs(hi_), 1.0):
             raise SegmentationError(f"{scan.source}: the volume has a single grey value ({lo_:.4g}); "
-                                    "nothing to segment")
+                                    "nothing to segment: check that the file holds the reconstructed scan (an empty or "
+                                    "failed reconstruction is all one value) and, for a raw file, its --shape and --dtype")
         with np.errstate(divide="ignore", invalid="ignore"):      # empty histogram bins, harmless
             thr = float(threshold_isodata(sm) if threshold is None else threshold)
         binary = sm > thr

@@ -1,41 +1,8 @@
-"""Scenes: each module defines one experiment (its case section, its derived numbers, the
-physics features it needs, and the files it prepares for the engines).
+"""Scenes: each module defines one experiment behind :class:`orchestrator.scenes.base.Scene`
+(its case section, the case terms it realises, its derived numbers, required engine features,
+control names with units, the neutral series its decks write, and ``post``).
 
-A scene module provides:
-
-- ``Scene``: a pydantic model with ``kind: Literal["<name>"]`` (the case's ``scene:`` section);
-- ``required_features(case) -> list[str]``: physics features the engines must offer
-  (vocabulary in :mod:`engines.base`);
-- ``derive(case, common) -> dict``: scene numbers for the templates (SI), from the case and the
-  common derived parameters;
-- ``max_velocity(case) -> float``: largest expected relative velocity [m/s] (for the Hertz
-  time-step limit);
-- optional ``prepare(case, params, run_dir) -> dict``: write shared input files (meshes,
-  particle lists) and return their paths for the templates;
-- ``CONTROLS``: names of per-frame control values written to frames.h5.
+Scenes are found through the registry (:func:`orchestrator.registry.get_scene`, entry-point group
+``orchestrator.scenes`` in pyproject.toml); adding one is one module plus one template per engine
+(docs/architecture.md).
 """
-from __future__ import annotations
-
-import importlib
-
-#: scene kind -> module name. Add a scene here.
-SCENES = {
-    "impact": "orchestrator.scenes.impact",
-    "triaxial": "orchestrator.scenes.triaxial",
-    "shear_cell": "orchestrator.scenes.shear_cell",
-    "plane_shear": "orchestrator.scenes.plane_shear",
-}
-
-
-def scene_module(kind: str):
-    if kind not in SCENES:
-        raise KeyError(f"unknown scene kind {kind!r}; known: {', '.join(SCENES)}")
-    return importlib.import_module(SCENES[kind])
-
-
-def scene_models():
-    return [scene_module(k).Scene for k in SCENES]
-
-
-def scene_kinds():
-    return list(SCENES)

@@ -16,8 +16,8 @@ from pydantic import Field, field_validator
 from ..case import Strict, positive
 from ..derive import YADE_PLANE_SPHERE_FACTOR, hertz_contact_time
 from ..units import Angle, Length, Velocity
+from . import base
 
-CONTROLS: tuple[str, ...] = ()
 
 
 class Scene(Strict):
@@ -102,3 +102,19 @@ def derive(case, common: dict) -> dict:
         "duration": duration, "box_lo": lo.tolist(), "box_hi": hi.tolist(),
         "angles": list(map(float, s.angles)), "target": s.target, **extra,
     }
+
+
+class ImpactScene(base.Scene):
+    """Binary impacts (module docstring). Controls: none; no wall series."""
+    kind = "impact"
+    section = Scene
+    honoured = frozenset({"output.contacts", "output.stress", "initial_packing"})
+    controls = {}
+
+    required_features = staticmethod(required_features)
+    derive = staticmethod(derive)
+    max_velocity = staticmethod(max_velocity)
+
+    def stability_inputs(self, case, params):
+        sc = params["scene"]
+        return {"height": sc["box_hi"][2] - sc["box_lo"][2]}

@@ -23,6 +23,7 @@ over the shear strain ≥ ``steady_from`` × ``shear_strain``.
 """
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Literal
@@ -31,11 +32,14 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ..case import Strict, positive
+from ..numerics import multiple_of
 from ..derive import adhesion_force, DerivationError
+from ..particles_io import ensure_particle_table
+from ..psd import lognormal_diameters, mean_sphere_volume
 from ..units import Pressure
+from . import base
 from .shear_cell import PSD
 
-CONTROLS: tuple[str, ...] = ("strain", "stage")
 STAGES = {"initial": 0, "compressed": 1, "shear": 2}
 
 
@@ -90,7 +94,6 @@ def _has_torsion(c) -> bool:
 
 
 def _mean_volume(s) -> float:
-    from ..psd import mean_sphere_volume
     p = s.psd
     return mean_sphere_volume(p.median, p.d_min, p.d_max, p.sigma_ln)
 
@@ -213,7 +216,7 @@ def derive(case, common: dict) -> dict:
         "geometry": g, "box_lo": g["box_lo"], "box_hi": g["box_hi"],
         "stages": {"compress": [0, s1], "shear": [s1, s2]}, "steps": s2, "total_steps": s2,
         "events": events, "frame_steps": frame_steps, "frame_stage": frame_stage,
-        "dump_every": max(1, s2), "restart_every": max(1000, s2 // 5), "wall_every": wall_every,
+        "dump_every": max(1, s2), "restart_every": multiple_of(max(1000, s2 // 5), wall_every), "wall_every": wall_every,
         "servo": {"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo,
                   "travel": travel},
         "v_shear": v_shear, "shear_rate": gamma_dot, "skin": skin,
@@ -266,7 +269,6 @@ def pack_box(radii, L: float, z_lo: float, z_hi: float, rng, max_tries: int = 20
 
 
 def sample_particles(case, params) -> dict:
-    from ..psd import lognormal_diameters
     s = case.scene
     sc = params["scene"]
     g = sc["geometry"]
@@ -285,7 +287,6 @@ def sample_particles(case, params) -> dict:
 
 
 def prepare(case, params, run_dir) -> dict:
-    from ..particles_io import ensure_particle_table
     table = ensure_particle_table(run_dir, case, lambda: sample_particles(case, params))
     return {"particles": str(table)}
 
@@ -300,7 +301,7 @@ def _strain_of_step(params, steps):
 def _controls(params, steps) -> dict:
     sc = params["scene"]
     lookup = dict(zip(sc["frame_steps"], sc["frame_stage"]))
-    return {"strain": _strain_of_step(params, steps),
+    return {"shear_strain": _strain_of_step(params, steps),
             "stage": np.array([lookup.get(int(s), np.nan) for s in steps], float)}
 
 
@@ -317,36 +318,9 @@ def _walls(params, a: np.ndarray) -> dict:
             "bottom": {"time": t, "force": a[:, 5:8]}}
 
 
-def liggghts_extras(run_dir, params) -> dict:
-    run_dir = Path(run_dir)
-    rows = [np.loadtxt(f, comments="#", ndmin=2) for f in sorted(run_dir.glob("walls.*.txt"))]
-    rows = [r for r in rows if r.size]
-    out = {"controls": _controls(params, params["scene"]["frame_steps"])}
-    if rows:
-        out["walls"] = _walls(params, np.vstack(rows))
-    return out
-
-
-#: LAMMPS writes the same wall file (fix ave/time, templates/lammps/plane_shear.in.j2)
-lammps_extras = liggghts_extras
-
-
-def yade_extras(run_dir, params) -> dict:
-    run_dir = Path(run_dir)
-    rows = [np.load(f) for f in sorted(run_dir.glob("walls.yade.*.npy"))]
-    rows = [r for r in rows if r.size]
-    steps = []
-    for c in sorted((run_dir / "dump").glob("chunk.*.npz")):
-        steps += [int(i) for i in np.load(c)["iter"]]
-    out = {"controls": _controls(params, sorted(set(steps)))}
-    if rows:
-        out["walls"] = _walls(params, np.vstack(rows))
-    return out
-
-
 def mu_macro_series(frames) -> "pd.DataFrame":
     """μ_macro(strain) = |F_x|/|F_z| on the top wall, from a run's frames.h5."""
-    import pandas as pd
+    import pandas as pd        # on demand: pandas costs ~0.3 s to import
     w = frames.wall("top")
     with np.errstate(invalid="ignore", divide="ignore"):
         mu = np.abs(w["force_x"].to_numpy()) / np.abs(w["force_z"].to_numpy())
@@ -377,7 +351,6 @@ def steady_mu(frames, params_or_summary: dict | None = None, steady_from_strain:
 
 def frames_target(frames) -> float | None:
     try:
-        import json
         meta = frames.meta
         case = meta.get("case") if isinstance(meta, dict) else None
         if isinstance(case, str):
@@ -387,3 +360,30 @@ def frames_target(frames) -> float | None:
         return float(str(s["normal_stress"]).split()[0]) * L * L
     except Exception:
         return None
+
+
+class PlaneShearScene(base.Scene):
+    """Periodic plane shear between two rough walls (module docstring). Controls per frame: the
+    imposed ``shear_strain`` (γ = v_shear t / h) and the protocol ``stage``; wall series ``top``
+    (with its ``strain``) and ``bottom``."""
+    kind = "plane_shear"
+    section = Scene
+    honoured = frozenset({"contact.adhesion", "contact.rolling", "contact.torsion", "gravity", "initial_packing"})
+    controls = {"shear_strain": "1", "stage": "1"}
+    #: the decks' wall sampler: step, z_top, Fx Fy Fz on the top wall, Fx Fy Fz on the bottom wall
+    wall_columns = ("step", "z_top", "fx_top", "fy_top", "fz_top", "fx_bottom", "fy_bottom", "fz_bottom")
+    observables = ("mu_macro",)
+
+    required_features = staticmethod(required_features)
+    derive = staticmethod(derive)
+    max_velocity = staticmethod(max_velocity)
+    size_range = staticmethod(size_range)
+    stability_inputs = staticmethod(stability_inputs)
+    prepare = staticmethod(prepare)
+
+    def post(self, run_dir, params, output):
+        rows = output.wall_rows()
+        out = {"controls": _controls(params, output.frame_steps)}
+        if rows is not None and rows.size:
+            out["walls"] = _walls(params, rows)
+        return out

@@ -33,12 +33,18 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
+from scipy.integrate import solve_ivp
 
+from ..atomic import write_json
 from ..case import Strict, positive
 from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
+from ..numerics import multiple_of
+from ..geometry import cylinder_shell, vaned_piston, write_stl
+from ..particles_io import ensure_particle_table
+from ..psd import lognormal_diameters, mean_sphere_volume, pack_cylinder
 from ..units import Angle, AngularVelocity, Length, Pressure
+from . import base
 
-CONTROLS: tuple[str, ...] = ("angle", "stage")
 STAGES = {"initial": 0, "relaxed": 1, "compressed": 2, "shear": 3}
 DEG = math.pi / 180
 
@@ -140,7 +146,6 @@ def size_range(case) -> tuple[float, float]:
 
 
 def _mean_volume(scene) -> float:
-    from ..psd import mean_sphere_volume
     p = scene.psd
     return mean_sphere_volume(p.median, p.d_min, p.d_max, p.sigma_ln)
 
@@ -226,7 +231,6 @@ def max_velocity(case) -> float:
 def seed000_restitution(E_eff: float, m_eff: float, r_eff: float, v: float) -> float:
     """Restitution [-] that seed 000's damped Hertz law F = 4/3 E* √r ξ^1.5 + γ_n √ξ ξ̇ with
     γ_n = √(4/3 E* m*) delivers at normal impact speed ``v`` [m/s] (force clipped at 0)."""
-    from scipy.integrate import solve_ivp
     k = 4 / 3 * E_eff * math.sqrt(r_eff)
     g = math.sqrt(4 / 3 * E_eff * m_eff)
 
@@ -375,7 +379,7 @@ def derive(case, common: dict) -> dict:
         "stages": {"relax": [s0, s1], "compress": [s1, s2], "shear": [s2, s3]},
         "steps": s3, "total_steps": s3,
         "events": events, "frame_steps": frame_steps, "frame_angles": frame_angles, "frame_stage": frame_stage,
-        "dump_every": max(1, s3), "restart_every": max(1000, s3 // 10), "wall_every": wall_every,
+        "dump_every": max(1, s3), "restart_every": multiple_of(max(1000, s3 // 10), wall_every), "wall_every": wall_every,
         "average_window_steps": max(wall_every, int(math.ceil(s.average_window * n_settle))),
         "gamma_visc": gamma_visc, "yade_drag_nu": gamma_visc / (6 * math.pi * x50 / 2),
         "relax_tau_steps": tau_steps, "m50": m50,
@@ -398,7 +402,6 @@ def derive(case, common: dict) -> dict:
 def build_meshes(case, params) -> dict:
     """The three solids (Mesh objects): ``lower`` piston (vanes up, plate face at z = 0), ``upper``
     piston (vanes down), ``cylinder`` (closed can around both)."""
-    from ..geometry import cylinder_shell, vaned_piston
     s = case.scene
     g = params["scene"]["geometry"]
     seg = g["segments"]
@@ -414,7 +417,6 @@ def build_meshes(case, params) -> dict:
 
 def sample_particles(case, params) -> dict:
     """Diameters and loose positions, sampled once from the case's seed (same for all engines)."""
-    from ..psd import lognormal_diameters, pack_cylinder
     s = case.scene
     g = params["scene"]["geometry"]
     rng = np.random.default_rng(case.seed)
@@ -425,8 +427,6 @@ def sample_particles(case, params) -> dict:
 
 def prepare(case, params, run_dir) -> dict:
     """Write particles.txt (and LIGGGHTS' particles.data) and the three STL meshes."""
-    from ..geometry import write_stl
-    from ..particles_io import ensure_particle_table
     run_dir = Path(run_dir)
     files = {}
     meshes = build_meshes(case, params)
@@ -486,23 +486,8 @@ def _wall_result(params, step, z_lower, f_lower, t_rot, t_lower):
 
 def _write_check(run_dir, params, walls, step):
     chk = _compression_check(params, walls["lower_piston"]["time"], step, walls["lower_piston"]["force"][:, 2])
-    from ..atomic import write_json
     write_json(Path(run_dir) / "shear_cell_checks.json", {"compression": chk})
     return chk
-
-
-def liggghts_extras(run_dir, params) -> dict:
-    """Wall series from ``walls.*.txt`` (fix ave/time, averages over each sampling interval) and
-    the per-frame ``angle``/``stage`` controls."""
-    run_dir = Path(run_dir)
-    rows = []
-    for f in sorted(run_dir.glob("walls.*.txt")):
-        a = np.loadtxt(f, comments="#", ndmin=2)
-        if a.size:
-            rows.append(a)
-    steps = [int(st) for st in params["scene"]["frame_steps"]]   # the deck writes exactly these
-    out = {"controls": _frame_controls(params, steps)}
-    return _with_walls(out, rows, run_dir, params)
 
 
 def _with_walls(out: dict, rows: list, run_dir, params) -> dict:
@@ -520,13 +505,35 @@ def _with_walls(out: dict, rows: list, run_dir, params) -> dict:
     return out
 
 
-def yade_extras(run_dir, params) -> dict:
-    """Wall series from ``walls.yade.*.npy`` (written by the script's sampler)."""
-    run_dir = Path(run_dir)
-    rows = [np.load(f) for f in sorted(run_dir.glob("walls.yade.*.npy"))]
-    steps = []
-    for c in sorted((run_dir / "dump").glob("chunk.*.npz")):
-        steps += [int(i) for i in np.load(c)["iter"]]
-    steps = sorted(set(steps))
-    out = {"controls": _frame_controls(params, steps)}
-    return _with_walls(out, rows, run_dir, params)
+class ShearCellScene(base.Scene):
+    """The vaned micro shear cell (module docstring). Controls per frame: the rotating piston's
+    ``angle`` [rad] and the protocol ``stage``; wall series ``lower_piston`` and ``rotating``."""
+    kind = "shear_cell"
+    section = Scene
+    honoured = frozenset({"contact.adhesion", "contact.rolling", "contact.torsion", "contact.damping: seed000",
+                          "gravity", "output.contacts", "output.stress", "initial_packing"})
+    controls = {"angle": "rad", "stage": "1"}
+    #: the decks' wall sampler (LIGGGHTS fix ave/time, YADE's sampler): one row per sample
+    wall_columns = ("step", "z_lower", "fx_lower", "fy_lower", "fz_lower", "tz_lower", "tz_upper", "tz_cylinder")
+    observables = ("torque", "angle")
+
+    required_features = staticmethod(required_features)
+    derive = staticmethod(derive)
+    max_velocity = staticmethod(max_velocity)
+    size_range = staticmethod(size_range)
+
+    def stability_inputs(self, case, params):
+        sc = params["scene"]
+        return {"wall_speeds": {"servo": sc["servo"]["v_max"], "rotating_rim": sc["omega"] * sc["geometry"]["R_cyl"]},
+                "confining_stress": case.scene.normal_stress, "skin": sc["skin"],
+                "height": sc["box_hi"][2] - sc["box_lo"][2],
+                "wall_force_target": sc["servo"]["target_force"]}
+
+    prepare = staticmethod(prepare)
+
+    def post(self, run_dir, params, output):
+        """Wall series from the sampler's rows and the per-frame ``angle``/``stage`` controls of
+        the frames the engine wrote; writes the compression check."""
+        rows = output.wall_rows()
+        out = {"controls": _frame_controls(params, [int(st) for st in output.frame_steps])}
+        return _with_walls(out, [] if rows is None else [rows], run_dir, params)

@@ -42,21 +42,32 @@ stage-2 reference). The volume V is measured two independent ways:
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import os
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
+from scipy.optimize import brentq
+from scipy.spatial import ConvexHull, cKDTree
 
+from ..atomic import write_json, write_text
 from ..case import Strict, positive
+from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
+from ..derive import DerivationError
+from ..numerics import running_mean
+from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
+from . import base
 
 #: per-frame controls written to frames.h5 (see module docstring)
-CONTROLS: tuple[str, ...] = ("stage", "axial_strain", "volumetric_strain", "volumetric_strain_hull",
-                             "sigma1", "sigma3", "stress_ratio", "volume_boundary", "volume_hull",
-                             "sigma3_hull")
+CONTROLS: dict[str, str] = {
+    "stage": "1", "axial_strain": "1", "volumetric_strain": "1", "volumetric_strain_hull": "1",
+    "sigma1": "Pa", "sigma3": "Pa", "stress_ratio": "1", "volume_boundary": "m^3", "volume_hull": "m^3",
+    "sigma3_hull": "Pa"}
 
 #: columns of the engines' time-series file ``triax.txt`` (both engines write the same)
 SERIES_COLUMNS = ("step", "time", "stage", "z_bottom", "z_top", "f_bottom", "f_top", "f_lateral",
@@ -133,7 +144,6 @@ def _truncated_mean(mu, s, lo, hi, m=4000):
 
 
 def _lognormal_mu(lo, hi, mean, s):
-    from scipy.optimize import brentq
     return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
 
 
@@ -229,7 +239,6 @@ class Particles(Strict):
         if self.shape == "clumps":
             if not self.library:
                 raise ValueError("particles.shape: clumps needs particles.library (a .yaml or .npz shape library)")
-            from ..clumps import load_library
             load_library(self.library)          # raises LibraryError (a ValueError) naming file and shape
         elif self.library is not None:
             raise ValueError("particles.library is only used with particles.shape: clumps")
@@ -280,7 +289,6 @@ def size_range(case) -> tuple[float, float]:
     library shapes scaled to the PSD's smallest and largest diameters; the time step follows)."""
     lo, hi = case.scene.psd.bounds()
     if case.scene.particles.shape == "clumps":
-        from ..clumps import equivalent_scale
         shapes = _clump_library(case.scene.particles.library)
         r_lo = min(float(sh[:, 3].min()) * equivalent_scale(sh, lo, v) for sh, (v, _) in shapes)
         r_hi = max(float(sh[:, 3].max()) * equivalent_scale(sh, hi, v) for sh, (v, _) in shapes)
@@ -293,7 +301,6 @@ _LIB_CACHE: dict = {}
 
 def _clump_library(path) -> list:
     """[(shape (m, 4), (union volume, centre of mass))] of a clump library, cached by path."""
-    from ..clumps import load_library, mass_properties
     key = str(Path(path).resolve())
     if key not in _LIB_CACHE:
         out = []
@@ -308,7 +315,6 @@ def _clump_draw(case, d: np.ndarray):
     """Per grain: library shape index, orientation quaternion, scale to the volume of diameter d,
     bounding-sphere radius [m]; and f = (Σ r_b³ / Σ (d/2)³)^(1/3), the factor by which the sample
     grows so that the bounding spheres fill it at the case's packing fraction."""
-    from ..clumps import bounding_radius, equivalent_scale, random_quaternions
     lib = _clump_library(case.scene.particles.library)
     rng = np.random.default_rng(case.seed + 3)
     k = rng.integers(len(lib), size=len(d))
@@ -324,7 +330,6 @@ def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, n
     by :func:`pack_cylinder` in the cylinder of radius R, height H [m] (:func:`derive` has enlarged
     it by :func:`_clump_draw`'s f). Returns (member spheres (M, 4) [m], clump index of each member (M,),
     clump mass centres (n, 3), packing geometry of the members)."""
-    from ..clumps import place
     lib = _clump_library(case.scene.particles.library)
     k, q, scale, rb, f = _clump_draw(case, d)
     centres, _ = cached_packing(rb, R, H, case.seed + 2)
@@ -375,7 +380,6 @@ def liggghts_clumps(case, d: np.ndarray) -> dict:
     The weights of ``particledistribution/discrete/numberbased`` are count/n: with
     ``random_distribute exact`` LIGGGHTS inserts exactly these counts (checked on the installed
     binary: 300 bodies of two templates at 40/60 % gave 120/180)."""
-    from ..clumps import equivalent_scale, mass_properties
     P = case.scene.particles
     lib = _clump_library(P.library)
     k = _clump_draw(case, d)[0]
@@ -553,7 +557,6 @@ def derive(case, common: dict) -> dict:
     gain_critical = p * d50 ** 2 / (v_iso * servo_every * dt * k_hertz)
     gain = s.isotropic.gain if s.isotropic.gain is not None else 0.8 * gain_critical
     if gain >= gain_critical:
-        from ..derive import DerivationError
         raise DerivationError(f"scene.isotropic.gain = {gain:.3g} is at or above the servo's stability limit "
                               f"g_c = {gain_critical:.3g} (p d50^2 / (v_max n dt k), docs/triaxial.md): the platen "
                               f"would overshoot at every update; use a gain below {gain_critical:.3g} or leave it "
@@ -565,7 +568,6 @@ def derive(case, common: dict) -> dict:
         r_min = common["r_min"]
         tau = 2 * rho * r_min ** 2 / (9 * nu)          # m/b of the smallest grain
         if dt > tau:
-            from ..derive import DerivationError
             raise DerivationError(f"scene.isotropic.drag: the drag time m/b = {tau:.3g} s of the smallest grain is "
                                   f"below dt = {dt:.3g} s (explicit drag unstable); raise "
                                   "scene.isotropic.inertial_number or set drag: false")
@@ -617,8 +619,6 @@ def derive(case, common: dict) -> dict:
 def prepare(case, params: dict, run_dir: Path) -> dict:
     """Pack the grains (cached in run_dir), write particles.txt and the platen meshes; complete
     params['scene'] with the packed geometry."""
-    from ..atomic import write_json
-    from ..particles_io import write_particle_table
     sc = params["scene"]
     run_dir = Path(run_dir)
     geo_path = run_dir / "packing.json"
@@ -630,7 +630,6 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
         m, owner, _, geo = build_clumps(case, np.asarray(sc["diameters"]), sc["diameter"] / 2, sc["height"])
         ids = np.arange(1, len(m) + 1)
         write_particle_table(run_dir / "particles.txt", ids, m[:, 3], case.material.density, m[:, :3])
-        from ..atomic import write_text
         write_text(run_dir / "clumps.txt", "# member_id clump\n" +
                    "".join(f"{i} {c}\n" for i, c in zip(ids, owner)))
         write_json(geo_path, geo)
@@ -657,7 +656,6 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
 
 def _write_square_stl(path: Path, half: float, z: float, up: bool):
     """A square plate of half-width ``half`` at height z, two triangles, normal +z if ``up``."""
-    from ..atomic import write_text
     a, b, c, dd = (-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)
     tris = [(a, b, c), (a, c, dd)] if up else [(a, c, b), (a, dd, c)]
     nz = 1.0 if up else -1.0
@@ -676,8 +674,6 @@ def _write_square_stl(path: Path, half: float, z: float, up: bool):
 def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.ndarray, dict]:
     """:func:`pack_cylinder`, cached by its inputs in ``$ORCHESTRATOR_CACHE/packings`` (default
     ``~/.cache/orchestrator``), so that both engines' runs of a case pack once."""
-    import hashlib
-    import os
     h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 1)).encode())
     root = Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / "packings"
     f = root / f"{h.hexdigest()[:24]}.npz"
@@ -699,7 +695,6 @@ def pack_cylinder(r: np.ndarray, R: float, H: float, rng: np.random.Generator, t
     of overlapping spheres (each moved in inverse proportion to its volume) and projection into
     the cylinder, until the largest overlap is below ``tol`` × r_min; the remaining overlaps are
     removed by a uniform expansion about the centre. Returns (positions, geometry)."""
-    from scipy.spatial import cKDTree
     n = len(r)
     u = rng.random(n)
     th = rng.random(n) * 2 * np.pi
@@ -779,7 +774,6 @@ def hull_volume(pos: np.ndarray, r: np.ndarray, z_bottom: float | None = None, z
     """Volume [m³] of the convex hull of the grains' surfaces, clipped to the platens
     z_bottom ≤ z ≤ z_top when given. Surfaces are sampled with 96 points per sphere for the
     spheres whose centre lies within 2 r_max of the centres' hull (the others cannot touch it)."""
-    from scipy.spatial import ConvexHull
     ok = ~np.isnan(pos).any(axis=1)
     pos, r = pos[ok], r[ok]
     h0 = ConvexHull(pos)
@@ -833,12 +827,6 @@ def smoothing_rows(n: int) -> int:
     return max(1, min(10, n // 10))
 
 
-def running_mean(x: np.ndarray, w: int) -> np.ndarray:
-    """Means over every window of w consecutive rows (len(x) - w + 1 values)."""
-    x = np.asarray(x, dtype=float)
-    return np.convolve(x, np.ones(w) / w, mode="valid") if len(x) >= w else np.array([np.mean(x)])
-
-
 def peak_stress_ratio(sigma1: np.ndarray, sigma3: np.ndarray, w: int) -> dict:
     """Peak σ1/σ3 during loading: ``smoothed`` = the largest ratio of the w-row running means of
     σ1 and σ3 (the same window as ``sigma3_error_max_abs_smoothed``), ``instantaneous`` = the
@@ -852,8 +840,6 @@ def peak_stress_ratio(sigma1: np.ndarray, sigma3: np.ndarray, w: int) -> dict:
 
 def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positions) -> dict:
     """Controls per frame, wall/time series and the scene summary (``scene_summary.json``)."""
-    from ..atomic import write_json
-    from ..particles_io import read_particle_table
     sc = params["scene"]
     p = sc["pressure"]
     s = read_series(run_dir)
@@ -945,225 +931,24 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
     return {"controls": controls, "walls": walls}
 
 
-def _frame_positions_liggghts(run_dir: Path):
-    from engines.liggghts import dump_segments, read_binary_dump
-    from ..particles_io import read_particle_table
-    cols = json.loads((Path(run_dir) / "dump" / "columns.json").read_text())
-    ids = read_particle_table(Path(run_dir) / "particles.txt")["id"]
-    row = {int(i): k for k, i in enumerate(ids)}
-    frames = list(read_binary_dump(dump_segments(run_dir), len(cols)))
-    steps = np.array([s for s, _ in frames])
+class TriaxialScene(base.Scene):
+    """The membrane triaxial test (module docstring): both engines' decks write the neutral
+    time series ``triax.txt`` (:data:`SERIES_COLUMNS`); :meth:`post` turns it and the frames'
+    positions into the per-frame :data:`CONTROLS`, the wall series and ``scene_summary.json``."""
+    kind = "triaxial"
+    section = Scene
+    honoured = frozenset({"output.contacts", "output.stress", "initial_packing"})
+    controls = CONTROLS
+    series_file = "triax.txt"
+    series_columns = SERIES_COLUMNS
+    observables = ("peak_stress_ratio", "sigma3_error")
 
-    def positions(k):
-        a = frames[k][1]
-        out = np.full((len(ids), 3), np.nan)
-        rows = [row[int(i)] for i in a[:, cols.index("id")]]
-        out[rows] = a[:, [cols.index(c) for c in ("x", "y", "z")]]
-        return out
-    return steps, positions
+    required_features = staticmethod(required_features)
+    derive = staticmethod(derive)
+    max_velocity = staticmethod(max_velocity)
+    size_range = staticmethod(size_range)
+    stability_inputs = staticmethod(stability_inputs)
+    prepare = staticmethod(prepare)
 
-
-def _frame_positions_yade(run_dir: Path):
-    chunks = sorted((Path(run_dir) / "dump").glob("chunk.*.npz"), key=lambda p: int(p.name.split(".")[1]))
-    steps, refs, seen = [], [], set()
-    for c in chunks:
-        d = np.load(c)
-        for k, it in enumerate(d["iter"]):
-            if int(it) in seen:
-                continue
-            seen.add(int(it))
-            steps.append(int(it))
-            refs.append((c, k))
-
-    def positions(k):
-        c, kk = refs[k]
-        return np.load(c)["position"][kk]
-    return np.array(steps), positions
-
-
-def liggghts_before_parse(run_dir, params) -> None:
-    """Inserted clumps (substitute ``inserted_clumps``): LIGGGHTS numbered the member spheres it
-    inserted, so the run's particle table and clump map are written from its first frame (taken when
-    stage 1 starts, after the insertion and the platens' closing; the members have not moved): ``particles.txt`` (member id, radius [m], density [kg/m^3], position
-    [m] in that frame), ``clumps.txt`` (member id, clump index 0 ... n-1 = LIGGGHTS body id - 1) and,
-    in YADE's format, ``dump/clumps_start.txt`` / ``clumps_end.txt`` (body id, mass [kg] as LIGGGHTS
-    carries it on the members in the first / last frame, principal moments of inertia [kg m^2] of the
-    template it was inserted from (what LIGGGHTS was given), member ids). The orchestrator's placed
-    packing (prepare) is kept as ``particles_placed.txt`` / ``clumps_placed.txt``. Stops with the
-    deck's fix named when the first frame holds fewer clumps than asked (the deck itself stops with
-    an ERROR line right after an incomplete insertion)."""
-    sc = params["scene"]
-    C = (sc.get("clumps") or {}).get("liggghts")
-    if not C:
-        return
-    import os
-    from engines.base import EngineError
-    from engines.liggghts import dump_segments, read_binary_dump
-    from ..atomic import write_text
-    from ..particles_io import read_particle_table, write_particle_table
-    run_dir = Path(run_dir)
-    hint = ("raise scene.particles.insertion_attempts or lower scene.packing_fraction (the sample is sized so "
-            "that the clumps' bounding spheres fill it at packing_fraction)")
-    cols = json.loads((run_dir / "dump" / "columns.json").read_text())
-    first = last = None
-    for frame in read_binary_dump(dump_segments(run_dir), len(cols)):    # only the first and last are kept
-        first = first or frame
-        last = frame
-    if first is None:
-        raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames")
-    (step0, a0), (_, a1) = first, last
-    col = {c: cols.index(c) for c in ("id", "mol", "mass", "radius", "x", "y", "z")}
-    ids = a0[:, col["id"]].astype(np.int64)
-    mol = a0[:, col["mol"]].astype(np.int64)
-    bodies = np.unique(mol)
-    if len(bodies) != C["count"] or len(ids) != C["members"]:
-        raise EngineError(
-            f"{run_dir / 'deck.in'}: fix ms_ins (insert/pack): the first frame (step {step0}) holds {len(bodies)} "
-            f"of {C['count']} clumps ({len(ids)} of {C['members']} member spheres): {hint}")
-    placed = run_dir / "particles_placed.txt"
-    if not placed.exists():
-        os.replace(run_dir / "particles.txt", placed)
-        if (run_dir / "clumps.txt").exists():
-            os.replace(run_dir / "clumps.txt", run_dir / "clumps_placed.txt")
-    rho = float(read_particle_table(placed)["density"][0])
-    write_particle_table(run_dir / "particles.txt", ids, a0[:, col["radius"]], rho,
-                         a0[:, [col["x"], col["y"], col["z"]]])
-    write_text(run_dir / "clumps.txt", "# member_id clump (LIGGGHTS body id - 1)\n" +
-               "".join(f"{i} {m - 1}\n" for i, m in zip(ids, mol)))
-    # the template of every body: member count and sorted radii (distinct per shape and size class)
-    keys = [(t["nspheres"], np.sort([sp[3] for sp in t["spheres"]])) for t in C["templates"]]
-    r0 = a0[:, col["radius"]]
-
-    def template_of(rows):
-        rr = np.sort(r0[rows])
-        for k, (m, tr) in enumerate(keys):
-            if m == len(rr) and np.allclose(rr, tr, rtol=1e-9, atol=0):
-                return k
-        raise EngineError(f"{run_dir}: a LIGGGHTS body with member radii {rr.tolist()} matches no template")
-
-    by_id1 = {int(i): k for k, i in enumerate(a1[:, col["id"]].astype(np.int64))}
-    start, end = [], []
-    for b in bodies:
-        rows = np.flatnonzero(mol == b)
-        t = C["templates"][template_of(rows)]
-        mem = " ".join(str(int(i)) for i in np.sort(ids[rows]))
-        pr = " ".join("%.17g" % v for v in t["principal"])
-        start.append(f"{b} {a0[rows[0], col['mass']]:.17g} {pr} {mem}\n")
-        r1 = [by_id1[int(i)] for i in ids[rows] if int(i) in by_id1]
-        if r1:
-            end.append(f"{b} {a1[r1[0], col['mass']]:.17g} {pr} {mem}\n")
-    write_text(run_dir / "dump" / "clumps_start.txt", "".join(start))
-    write_text(run_dir / "dump" / "clumps_end.txt", "".join(end))
-
-
-def liggghts_extras(run_dir, params) -> dict:
-    steps, positions = _frame_positions_liggghts(run_dir)
-    out = compute_extras(run_dir, params, steps, positions)
-    C = (params["scene"].get("clumps") or {}).get("liggghts")
-    if C:                                       # the substitute's figures in the run summary
-        from ..atomic import write_json
-        f = Path(run_dir) / "scene_summary.json"
-        summ = json.loads(f.read_text())
-        summ["clumps"] = {"substitute": "inserted_clumps", "clumps": C["count"], "member_spheres": C["members"],
-                          "templates": len(C["templates"]), "size_classes": C["classes"],
-                          "first_frame_step": int(steps[0])}
-        write_json(f, summ)
-    return out
-
-
-def yade_extras(run_dir, params) -> dict:
-    steps, positions = _frame_positions_yade(run_dir)
-    out = compute_extras(run_dir, params, steps, positions)
-    mfile = Path(run_dir) / "dump" / "membrane.npz"
-    if mfile.exists():                          # membrane node positions at the frame times
-        m = np.load(mfile)
-        out["walls"]["membrane"] = {"time": m["time"], "step": m["iter"], "node_position": m["position"],
-                                    "triangles": m["triangles"], "node_radius": np.array([m["node_radius"]])}
-    return out
-
-
-# ---------------------------------------------------------------------------------------------
-# Resume (orchestrator.runner._scene_resume)
-# ---------------------------------------------------------------------------------------------
-#: columns of LIGGGHTS' restart/state.txt, one line per restart file (templates/liggghts/triaxial.in.j2)
-RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ztot", "vlast", "H0", "shear_start")
-
-
-def read_restart_states(run_dir: Path) -> dict[int, dict]:
-    """{step: stage state} from LIGGGHTS' ``restart/state.txt`` (the last line of each step wins:
-    a resumed run may write a step again)."""
-    f = Path(run_dir) / "restart" / "state.txt"
-    out = {}
-    if not f.exists():
-        return out
-    for line in f.read_text().splitlines():
-        parts = line.split()
-        if len(parts) != len(RESTART_STATE_COLUMNS):
-            continue                                    # a line cut by a kill
-        try:
-            row = dict(zip(RESTART_STATE_COLUMNS, (float(x) for x in parts)))
-        except ValueError:
-            continue
-        for k in ("step", "stage", "chunks", "dragon", "shear_start"):
-            row[k] = int(row[k])
-        out[row["step"]] = row
-    return out
-
-
-def _keep_rows_upto(path: Path, step: int) -> None:
-    """Rewrite a whitespace table whose first column is the step, keeping comment lines and the
-    rows with step <= ``step`` (atomic; a last line cut by a kill goes too)."""
-    from ..atomic import write_text
-    if not path.exists():
-        return
-    keep = []
-    for line in path.read_text().splitlines():
-        if line.startswith("#"):
-            keep.append(line)
-            continue
-        try:
-            if int(float(line.split()[0])) <= step:
-                keep.append(line)
-        except (ValueError, IndexError):
-            continue
-    write_text(path, "\n".join(keep) + ("\n" if keep else ""))
-
-
-def resume_point(engine_name: str, run_dir: Path, resume: dict | None) -> dict | None:
-    """Complete the engine's resume point for a triaxial run.
-
-    LIGGGHTS: a restart file is usable only with its line of ``restart/state.txt`` (stage, chunks
-    done, drag on/off, the integrated platen velocity, H0 and the loading start: what the resumed
-    deck needs to re-enter the right stage); the newest such file is taken (or the one the runner
-    asks for when an older one is tried), ``triax.txt`` and ``state.txt`` are cut back to its step.
-    With no usable file the run starts afresh, and stale restart files are removed.
-    YADE: the script itself reloads its Python state from the checkpoint (O.tags) and cuts
-    ``triax.txt`` back to the checkpoint's iteration; nothing to do here."""
-    run_dir = Path(run_dir)
-    if engine_name != "liggghts":
-        return resume
-    params_file = run_dir / "params.json"
-    if resume is not None and params_file.exists() and \
-            (json.loads(params_file.read_text()).get("scene") or {}).get("clumps"):
-        # a resumed multisphere deck would have to define the templates and fix multisphere again
-        # before read_restart: not built, so a LIGGGHTS clump run starts afresh (docs/triaxial.md)
-        resume = None
-    states = read_restart_states(run_dir)
-    if resume is not None:
-        step_of = lambda c: int(Path(c).name.split(".")[1])
-        wanted = resume.get("restart_file")
-        cands = [c for c in resume.get("candidates", [resume.get("restart_file")]) if c and step_of(c) in states]
-        if wanted and step_of(wanted) in states:
-            cands = [wanted] + [c for c in cands if step_of(c) < step_of(wanted)]
-        if cands:
-            step = step_of(cands[0])
-            resume = dict(resume, restart_file=cands[0], step=step, candidates=cands,
-                          scene_state=states[step])
-            _keep_rows_upto(run_dir / "triax.txt", step)
-            _keep_rows_upto(run_dir / "restart" / "state.txt", step)
-            return resume
-    # starting afresh: no stale restart file or state line may be picked up later
-    for f in (run_dir / "restart").glob("state.*.restart"):
-        f.unlink()
-    (run_dir / "restart" / "state.txt").unlink(missing_ok=True)
-    return None
+    def post(self, run_dir, params, output):
+        return compute_extras(run_dir, params, output.frame_steps, output.positions)

@@ -15,6 +15,12 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
+from engines.base import EngineError
+
+from ..case import load_case
+from ..derive import derive
+from ..runner import run_case
+
 #: shortening of a plane-shear probe: compression, a short settling and a little shear
 PROBE = {"plane_shear": {"scene": {"shear_strain": 0.1, "settle_time_constants": 3, "shear_frames": 1,
                                    "wall_samples": 20}}}
@@ -54,10 +60,6 @@ def _merge(a: dict, b: dict) -> dict:
 
 def probe(case_path, engine: str, fraction: float, runs_root, overrides: dict | None = None) -> dict:
     """One probe run at dt = fraction × dt_critical; returns {fraction, stable, status, tripped, ...}."""
-    from ..case import load_case
-    from ..derive import derive
-    from ..runner import run_case
-    from engines.base import EngineError
     base = load_case(case_path, overrides=overrides)
     p = derive(base)
     dt = fraction * p["dt_critical"]
@@ -78,8 +80,6 @@ def probe(case_path, engine: str, fraction: float, runs_root, overrides: dict | 
 def bisect(case_path, engine: str, runs_root="runs", rel_tol: float = 0.15, max_fraction: float = 64.0,
            probe_overrides: dict | None = None, log=None) -> Bisection:
     """Largest stable dt fraction of ``case_path`` on ``engine`` (see the module docstring)."""
-    from ..case import load_case
-    from ..derive import derive
     base = load_case(case_path)
     ov = probe_overrides if probe_overrides is not None else _merge(PROBE.get(base.scene.kind, {}),
                                                                     MEMBER_PROBE.get(base.name, {}))

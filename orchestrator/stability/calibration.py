@@ -13,6 +13,9 @@ import math
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import curve_fit
+
+from .sweep import sweep
 
 
 def saturating(mu, mu0, A, mu_c):
@@ -21,7 +24,6 @@ def saturating(mu, mu0, A, mu_c):
 
 def fit_saturating(mu, mu_macro, sigma=None) -> dict:
     """Least-squares fit of :func:`saturating`; needs 3 points or more."""
-    from scipy.optimize import curve_fit
     mu = np.asarray(mu, float)
     y = np.asarray(mu_macro, float)
     ok = np.isfinite(y)
@@ -70,7 +72,6 @@ def calibrate(case_path, mus: list[float], target: float | None = None, engines:
               runs_root="runs", scheduler=None, workers: int | None = None, plot: str | Path | None = None) -> dict:
     """Sweep contact.friction over ``mus`` (through :func:`orchestrator.stability.sweep.sweep`),
     fit per engine, invert for ``target``. Returns {"table", "fits", "mu_for_target", "plot"}."""
-    from .sweep import sweep
     df = sweep(case_path, {"contact.friction": [float(m) for m in mus]}, engines=engines, runs_root=runs_root,
                scheduler=scheduler, workers=workers)
     fits, inv = {}, {}

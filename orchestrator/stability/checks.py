@@ -33,8 +33,9 @@ from __future__ import annotations
 
 import math
 
-from ..derive import (DerivationError, damping_ratio, hertz_contact_time, hertz_max_overlap,
-                      rayleigh_time_step)
+from ..contact_law import (DerivationError, damping_ratio, hertz_contact_time, hertz_max_overlap,
+                           rayleigh_time_step)
+from ..registry import get_scene
 
 #: limits that are about stability (dt must stay below safe_fraction × limit)
 STABILITY_LIMITS = ("rayleigh", "hertz", "tangential", "coordination", "rolling", "twisting", "skin")
@@ -46,27 +47,10 @@ STEPS_PER_CONTACT = 10
 
 def scene_inputs(case, params: dict) -> dict:
     """What the checks need from the scene: confining stress [Pa], wall speeds [m/s], neighbour
-    skin [m], height of the granular region [m], contact spring constants. A scene module may
-    provide ``stability_inputs(case, params)``; otherwise the known scene keys are read."""
-    from ..scenes import scene_module
-    mod = scene_module(case.scene.kind)
+    skin [m], height of the granular region [m], contact spring constants, from the scene's
+    ``stability_inputs`` (:class:`orchestrator.scenes.base.Scene`); missing keys take neutral defaults."""
     sc = params.get("scene", {})
-    if hasattr(mod, "stability_inputs"):
-        out = dict(mod.stability_inputs(case, params))
-    else:
-        out = {}
-        walls = {}
-        if "servo" in sc:
-            walls["servo"] = sc["servo"]["v_max"]
-        if "omega" in sc and "geometry" in sc:
-            walls["rotating_rim"] = sc["omega"] * sc["geometry"]["R_cyl"]
-        out["wall_speeds"] = walls
-        out["confining_stress"] = getattr(case.scene, "normal_stress", 0.0) or 0.0
-        out["skin"] = sc.get("skin", 0.5 * params["r_max"])
-        lo, hi = sc.get("box_lo"), sc.get("box_hi")
-        out["height"] = (hi[2] - lo[2]) if lo and hi else 0.0
-        if "servo" in sc:
-            out["wall_force_target"] = sc["servo"]["target_force"]
+    out = dict(get_scene(case.scene.kind).stability_inputs(case, params))
     out.setdefault("wall_speeds", {})
     out.setdefault("confining_stress", 0.0)
     out.setdefault("skin", 0.5 * params["r_max"])
@@ -177,6 +161,14 @@ def safe_fractions(case) -> dict:
                                                               "contact_time", "rolling", "twisting", "skin")}
 
 
+def largest_safe_dt(case, params: dict) -> tuple[float, str]:
+    """(largest dt [s] within every stability limit's safe fraction, the binding limit)."""
+    cs = critical_steps(case, params)
+    safe = safe_fractions(case)
+    binding = min(cs["limits"], key=lambda k: cs["limits"][k] * safe[k])
+    return cs["limits"][binding] * safe[binding], binding
+
+
 def check(case, params: dict) -> dict:
     """The stability report for ``params['dt']``; raises DerivationError when dt is above a safe
     fraction of any limit and the case does not set ``timestep.allow_unsafe``."""
@@ -207,7 +199,8 @@ def check(case, params: dict) -> dict:
             f"largest expected speed {cs['speed']:.3g} m/s (walls: "
             + (", ".join(f"{n} {s:.3g} m/s" for n, s in cs["wall_speeds"].items()) or "none")
             + f"), confining stress {cs['confining_stress']:.3g} Pa, skin {cs['skin']:.3g} m. "
-            f"The largest safe dt is {dt_max:.3e} s ({binding}); lower timestep.fraction or dt, "
+            f"The largest safe dt is {dt_max:.3e} s ({binding}): use timestep.fraction <= "
+            f"{int(dt_max / params['dt_critical'] * 1000) / 1000:g} or a dt below {dt_max:.3e} s, "
             "or set timestep.allow_unsafe: true to run anyway (the monitors still watch the run)")
     return report
 

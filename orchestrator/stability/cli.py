@@ -6,6 +6,8 @@ import glob
 import json
 from pathlib import Path
 
+from ..registry import engine_names
+
 REPO = Path(__file__).resolve().parents[2]
 #: the members of cases/stability/ small enough for CI (soft grains, ~100 grains, seconds per probe)
 CI_SUITE = ("mu0", "mu1", "very_soft", "fast_shear", "restitution_overdamped")
@@ -143,7 +145,7 @@ def add_parsers(sub):
     s = sub.add_parser("stability", help="largest stable dt per case and engine (bisection) vs the pre-run check")
     s.add_argument("case", nargs="*", help="case YAML file(s)")
     s.add_argument("--suite", choices=["ci", "all"], help="the cases/stability/ suite (ci: its small members)")
-    s.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    s.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     s.add_argument("--runs", default="runs/stability")
     s.add_argument("--tol", type=float, default=0.15, help="relative bisection tolerance")
     s.add_argument("--csv", help="also write the table as CSV")
@@ -157,7 +159,7 @@ def add_parsers(sub):
                                                               "reference unless --reference)")
     c.add_argument("--reference", help="the value to compare against (default: the last)")
     c.add_argument("--target-error", type=float, default=0.05)
-    c.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    c.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     c.add_argument("--runs", default="runs")
     c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
     c.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: clean timings)")
@@ -169,7 +171,7 @@ def add_parsers(sub):
     w.add_argument("case")
     w.add_argument("--set", action="append", required=True, help="FIELD=V1,V2,... (dotted field, repeatable)")
     w.add_argument("--grid", action="store_true", help="Cartesian product of the --set lists (default: zip)")
-    w.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    w.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     w.add_argument("--runs", default="runs")
     w.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (default: local processes)")
     w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
@@ -180,7 +182,7 @@ def add_parsers(sub):
     k.add_argument("case", help="a plane_shear case")
     k.add_argument("--mu", required=True, help="friction coefficients, e.g. 0.1,0.3,0.6,1.0")
     k.add_argument("--target", type=float, help="target steady mu_macro")
-    k.add_argument("--engine", choices=["liggghts", "yade", "all"], default="all")
+    k.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     k.add_argument("--runs", default="runs")
     k.add_argument("--scheduler")
     k.add_argument("--workers", type=int)

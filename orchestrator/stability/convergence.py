@@ -21,14 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..case import CaseError, load_case
+from ..runner import read_summary, run_dir_for
+from .executor import get_executor, run_task
+from .sweep import _finished, nested
+
 KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count")
 _RATE_FIELDS = ("inertial_number", "compression_inertial_number", "quasi_static_number")
 
 
 def knob_overrides(case_path, knob: str, value) -> dict:
     """The nested overrides that set ``knob`` to ``value`` on the case at ``case_path``."""
-    from ..case import load_case
-    from .sweep import nested
     if knob == "dt_fraction":
         return {"timestep": {"fraction": float(value)}}
     base = load_case(case_path)
@@ -78,9 +81,6 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
            observables_used: list[str] | None = None, plot: str | Path | None = None) -> dict:
     """Run the ladder and compare; returns {"table": DataFrame, "recommendation": {...}, "plot": path}."""
     import pandas as pd
-    from ..case import load_case
-    from .executor import get_executor, run_task
-    from .sweep import _finished
     case0 = load_case(case_path)
     engines = engines or case0.engines
     rows = []
@@ -90,8 +90,6 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             tasks = []
             for v in values:
                 ov = knob_overrides(case_path, knob, v)
-                from ..case import CaseError
-                from ..runner import run_dir_for
                 try:
                     c = load_case(case_path, overrides=ov)
                 except CaseError as exc:             # e.g. a dt the pre-run check refuses: a row, not a crash
@@ -104,7 +102,6 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             results = [None] * len(tasks)
             todo = []
             for k, t in enumerate(tasks):
-                from ..runner import read_summary
                 if t.get("refused"):
                     results[k] = {"status": "refused", "error": t["refused"]}
                     continue

@@ -14,6 +14,7 @@ project's runs: the decks are patched).
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import re
@@ -21,31 +22,19 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 
-def _patch_liggghts(text: str, limit: float) -> str:
-    text = re.sub(r"if '\$\{ORCH_ov\} > [0-9.e+-]+'", f"if '${{ORCH_ov}} > {limit!r}'", text)
-    text = re.sub(r"print ORCH_UNSTABLE:overlap:\$\{ORCH_ov\}:[0-9.e+-]+:",
-                  f"print ORCH_UNSTABLE:overlap:${{ORCH_ov}}:{limit!r}:", text)
-    # the figures are printed at each check (the wall-force bookkeeping command runs every check)
-    return text.replace('"variable ORCH_wprev equal ${ORCH_w}"',
-                        '"print \'ORCH_OV ${ORCH_s} ${ORCH_ov} ${ORCH_ke}\'" "variable ORCH_wprev equal ${ORCH_w}"')
-
-
-def _patch_yade(text: str, limit: float) -> str:
-    text = text.replace("def orch_monitor():\n    m = ORCH_MON\n",
-                        f"def orch_monitor():\n    m = ORCH_MON\n    m['overlap_limit'] = {limit!r}\n")
-    return text.replace('    ov = dmax / m["r_min"]\n',
-                        '    ov = dmax / m["r_min"]\n    print("ORCH_OV %d %r %r" % (O.iter + 1, ov, ke), flush=True)\n')
+from ..case import load_case
+from ..derive import derive
+from ..registry import engine_names, get_engine
+from ..runner import run_case
+from .bisection import MEMBER_PROBE, PROBE, _merge
 
 
 def history(case_path, engine: str, fractions: list[float], runs_root="/tmp/orch_history",
             overlap_limit: float | None = None, timeout: float = 3600) -> list[dict]:
     """One probe per fraction; returns one summary dict per fraction (see the module docstring)."""
-    import numpy as np
-    from ..case import load_case
-    from ..derive import derive
-    from ..runner import run_case
-    from .bisection import MEMBER_PROBE, PROBE, _merge
+    eng = get_engine(engine)
     base = load_case(case_path)
     ov0 = _merge(PROBE.get(base.scene.kind, {}), MEMBER_PROBE.get(base.name, {}))
     p = derive(load_case(case_path, overrides=ov0 or None))
@@ -54,15 +43,11 @@ def history(case_path, engine: str, fractions: list[float], runs_root="/tmp/orch
     for f in fractions:
         dt = f * p["dt_critical"]
         case = load_case(case_path, overrides=_merge(ov0, {"timestep": {"dt": f"{dt!r} s", "allow_unsafe": True}}))
-        rd = Path(run_case(case, engine, runs_root=runs_root, dry_run=True, progress=False, analyze=False).run_dir)
-        if engine == "liggghts":
-            deck = rd / "deck.in"
-            deck.write_text(_patch_liggghts(deck.read_text(), limit))
-            cmd = ["liggghts", "-in", deck.name, "-log", "none", "-echo", "none"]
-        else:
-            deck = rd / "script.py"
-            deck.write_text(_patch_yade(deck.read_text(), limit))
-            cmd = ["yade", "-n", "-j", "1", "-x", deck.name]
+        rendered = run_case(case, engine, runs_root=runs_root, dry_run=True, progress=False, analyze=False)
+        rd = Path(rendered.run_dir)
+        deck = rd / rendered.summary["deck"]
+        deck.write_text(eng.print_monitors(deck.read_text(), limit))
+        cmd = eng.command(deck, case)
         t0 = time.perf_counter()
         pr = subprocess.run(cmd, cwd=rd, capture_output=True, text=True, timeout=timeout,
                             env=dict(os.environ, OMP_NUM_THREADS="1"))
@@ -92,10 +77,9 @@ def case_shear_start(run_dir: Path) -> int | None:
 
 
 def main(argv=None) -> int:
-    import argparse
     ap = argparse.ArgumentParser(prog="python -m orchestrator.stability.history", description=__doc__.splitlines()[0])
     ap.add_argument("case")
-    ap.add_argument("engine", choices=["liggghts", "yade"])
+    ap.add_argument("engine", choices=engine_names())
     ap.add_argument("fractions", nargs="+", type=float)
     ap.add_argument("--overlap-limit", type=float, default=None, help="overlap trip [r_min] (default: the case's)")
     ap.add_argument("--runs", default="/tmp/orch_history")

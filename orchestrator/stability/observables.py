@@ -26,6 +26,8 @@ def observables(case, run_dir) -> dict:
         return _plane_shear(case, fr, params)
     if kind == "shear_cell":
         return _shear_cell(case, fr, params)
+    if kind == "triaxial":
+        return _triaxial(case, fr)
     if kind == "impact":
         v = fr.velocity[-1]
         return {"rebound_speed": [float(x) for x in np.linalg.norm(v, axis=1)]}
@@ -83,9 +85,30 @@ def _shear_cell(case, fr, params) -> dict:
     z_lo = 0.0
     try:
         z_lo = float(fr.wall("lower_piston")["position_z"].iloc[-1])
+        out["piston_z"] = z_lo          # final lower-piston face height [m] (piston travel)
     except Exception:
         pass
     edges = np.linspace(z_lo, sc["geometry"]["z_upper_face"], 11)
     h, _ = np.histogram(z, edges)
     out["density_profile"] = [float(x) for x in h / max(1, ok.sum())]
+    return out
+
+
+#: axial strains at which the triaxial ladder compares σ1/σ3 and ε_v (issue #14)
+TRIAXIAL_STRAINS = (0.01, 0.02, 0.05, 0.10, 0.15)
+
+
+def _triaxial(case, fr) -> dict:
+    """σ1/σ3 (smoothed) and ε_v (compression positive) at the axial strains of
+    :data:`TRIAXIAL_STRAINS` reached by the run, and the peak and residual friction angles [deg]."""
+    from ..analysis.triaxial import analyze_triaxial
+    res = analyze_triaxial(fr)
+    c = res.tables["curves"]
+    ea = c["axial_strain"].to_numpy()
+    out = {"peak_friction_angle_deg": res.scalars["peak_friction_angle_deg"],
+           "residual_friction_angle_deg": res.scalars["residual_friction_angle_deg"]}
+    for e in TRIAXIAL_STRAINS:
+        if ea.size and ea.max() >= e:
+            out[f"stress_ratio@{e:g}"] = float(np.interp(e, ea, c["stress_ratio_smoothed"].to_numpy()))
+            out[f"volumetric_strain@{e:g}"] = float(np.interp(e, ea, c["volumetric_strain"].to_numpy()))
     return out

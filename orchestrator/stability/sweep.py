@@ -19,6 +19,12 @@ from pathlib import Path
 
 import yaml
 
+from ..atomic import write_json, write_text
+from ..case import CaseError, load_case
+from ..runner import read_summary, run_dir_for
+from .executor import get_executor, run_task
+from .observables import observables
+
 
 def parse_sets(sets: list[str]) -> dict[str, list]:
     out = {}
@@ -61,8 +67,6 @@ def plan(case_path, pts: list[dict], engines: list[str], runs_root) -> list[dict
 
 def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]:
     """The tasks of one point (one per engine); an invalid point gives tasks marked ``invalid``."""
-    from ..case import CaseError, load_case
-    from ..runner import read_summary, run_dir_for
     ov = nested(pt)
     try:
         case = load_case(case_path, overrides=ov)
@@ -82,9 +86,6 @@ def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]
 
 def _finished(task: dict) -> dict:
     """The result of a run that is already there (no engine started)."""
-    from ..case import load_case
-    from ..runner import read_summary
-    from .observables import observables
     s = read_summary(task["run_dir"])
     res = {"status": s["status"], "run_dir": task["run_dir"], "reused": True,
            "engine_time": s.get("wall_time", {}).get("engine"), "total_time": s.get("wall_time", {}).get("total"),
@@ -105,13 +106,11 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
     address, Client or cluster (else local processes, ``workers`` of them, default one per core).
     ``force`` re-runs even finished runs."""
     import pandas as pd
-    from .executor import get_executor, run_task
     if isinstance(sets, list):
         sets = parse_sets(sets)
     pts = points(sets, grid)
     sid = hashlib.sha256(json.dumps([str(case_path), sets, grid, engines], sort_keys=True, default=str)
                          .encode()).hexdigest()[:10]
-    from ..case import load_case
     name = load_case(case_path).name
     out_dir = Path(runs_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -171,7 +170,6 @@ def table(tasks, results) -> "pd.DataFrame":
 
 
 def _write(path: Path, tasks, results, sets, grid, elapsed):
-    from ..atomic import write_json, write_text
     data = {"sets": sets, "grid": grid, "elapsed_s": elapsed,
             "runs": [{**{k: v for k, v in t.items() if k != "done"}, "result": r} for t, r in zip(tasks, results)]}
     write_json(path, json.loads(json.dumps(data, default=str)))

@@ -2,25 +2,33 @@
 
 Render: ``templates/liggghts/<scene>.in.j2`` with the derived parameters; particles go in through
 ``read_data`` from the orchestrator's particle table, except where the deck inserts them itself
-(clumps: substitute ``inserted_clumps``; the scene's ``liggghts_before_parse`` hook then writes the
-particle table from the frames). Run: ``liggghts -in deck.in`` (under
-``mpirun -np N`` for N > 1 ranks), progress from thermo lines. Parse: ``dump custom`` text files
-(one per output step, ``dump/frame.<step>.txt``) into frames.h5. Resume: ``restart`` files
-``restart/state.<step>.restart`` and ``run N upto``.
+(clumps: substitute ``inserted_clumps``; :mod:`engines.liggghts.triaxial` then writes the
+particle table from the first frame). Run: ``liggghts -in deck.in`` (under ``mpirun -np N`` for
+N > 1 ranks), progress from thermo lines. Parse: the binary ``dump custom`` segments
+(:mod:`engines.liggghts.segments`, read by :mod:`engines.lammps_dump`) into frames.h5, with the
+scene's controls and wall series from its ``post`` (the scene sees the frames through
+:class:`DumpOutput`). Resume: ``restart`` files ``restart/state.<step>.restart`` and ``run N upto``.
 """
 from __future__ import annotations
 
 import json
 import re
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from orchestrator.atomic import write_json
+from orchestrator.atomic import write_json, write_text
+from orchestrator.frames import FrameWriter
+from orchestrator.particles_io import read_particle_table
+from orchestrator.registry import get_scene
 
-from .base import Engine, EngineError, tail
-from .render import render_template
+from ..base import Engine, EngineError, tail
+from ..lammps_dump import COLUMNS, read_binary_dump, stress_tensors, truncate_binary_dump
+from ..render import render_template
+from . import triaxial
+from .segments import dump_segments, wall_rows
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
@@ -28,6 +36,8 @@ _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 class Liggghts(Engine):
     name = "liggghts"
     executable = "liggghts"
+    throughput = 6e6        # ENGINES.md: 2000 dense Hertz spheres on one core of this machine
+    startup = 0.5
     capabilities = {
         "hertz": "pair_style gran model hertz",
         "restitution_damping": "model hertz with coefficientRestitution (Tsuji damping), limitForce on",
@@ -72,17 +82,16 @@ class Liggghts(Engine):
                                "orchestrator's grid integration), the same number of grains of each shape in "
                                "scene.particles.size_classes volume-mean sizes, inserted by fix insert/pack at random "
                                "places and orientations into the sample cylinder (not the orchestrator's packing), "
-                               "integrated by fix multisphere (scenes/triaxial.py liggghts_clumps)",
+                               "integrated by fix multisphere (scenes/triaxial.py liggghts_clumps, engines/liggghts/triaxial.py)",
         },
         "membrane": {
             "shell_pressure": "radial forces p·(band envelope area)·r_i²/Σr_j² on the outer shell of grains of "
-                              "each horizontal band, recomputed during the run (scenes/triaxial.py)",
+                              "each horizontal band, recomputed during the run (templates/liggghts/triaxial.in.j2)",
         },
     }
 
     def _probe_version(self) -> str:
         try:
-            import tempfile
             with tempfile.TemporaryDirectory() as tmp:   # `liggghts -h` leaves a log.liggghts behind
                 out = subprocess.run([self.executable, "-h"], capture_output=True, text=True, timeout=30,
                                      cwd=tmp).stdout
@@ -112,6 +121,26 @@ class Liggghts(Engine):
         deck = run_dir / ("resume.in" if resume else "deck.in")
         render_template(f"liggghts/{case.scene.kind}.in.j2", ctx, deck)
         return deck
+
+    def workers(self, case) -> int:
+        return case.engine_options.mpi_ranks
+
+    def complete_resume(self, case, run_dir: Path, resume):
+        """The triaxial deck re-enters its stage from ``restart/state.txt``: a restart file is usable
+        only with its line there (:func:`engines.liggghts.triaxial.resume_point`)."""
+        if case.scene.kind == "triaxial":
+            return triaxial.resume_point(run_dir, resume)
+        return resume
+
+    def print_monitors(self, deck_text: str, overlap_limit: float) -> str:
+        """templates/liggghts/partials/monitors.j2: the trip threshold, and a print at each check (the
+        wall-force bookkeeping command runs every check)."""
+        limit = overlap_limit
+        text = re.sub(r"if '\$\{ORCH_ov\} > [0-9.e+-]+'", f"if '${{ORCH_ov}} > {limit!r}'", deck_text)
+        text = re.sub(r"print ORCH_UNSTABLE:overlap:\$\{ORCH_ov\}:[0-9.e+-]+:",
+                      f"print ORCH_UNSTABLE:overlap:${{ORCH_ov}}:{limit!r}:", text)
+        return text.replace('"variable ORCH_wprev equal ${ORCH_w}"',
+                            '"print \'ORCH_OV ${ORCH_s} ${ORCH_ov} ${ORCH_ke}\'" "variable ORCH_wprev equal ${ORCH_w}"')
 
     def command(self, deck: Path, case) -> list[str]:
         # stdbuf: LIGGGHTS' stdout is block-buffered in a pipe and MPI_Abort discards the
@@ -170,15 +199,15 @@ class Liggghts(Engine):
             for seg in dump_segments(run_dir):
                 if truncate_binary_dump(seg, n, resume["step"]) == 0:
                     seg.unlink()
+        cut_wall_series(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
-        from orchestrator.frames import FrameWriter
-        from orchestrator.particles_io import read_particle_table
         run_dir = Path(run_dir)
-        # a scene whose particles the deck inserted checks the insertion and writes its particle
-        # table from the frames first
-        _scene_hook(case, "liggghts_before_parse", run_dir, params)
+        if _inserted(params):
+            # the deck inserted the particles (inserted_clumps): check the insertion and write the
+            # particle table from the first frame
+            triaxial.check_inserted_clumps(run_dir, params)
         segments = dump_segments(run_dir)
         if not segments:
             raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames\n{tail(run_dir / 'engine.log')}")
@@ -187,14 +216,16 @@ class Liggghts(Engine):
         mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
         fields = _fields(case)
         dt = params["dt"]
-        extras = _scene_hook(case, "liggghts_extras", run_dir, params)
+        cols = json.loads((run_dir / "dump" / "columns.json").read_text())
+        snaps = list(read_binary_dump(segments, len(cols)))
+        steps = np.array([s for s, _ in snaps], dtype=np.int64)
+        extras = get_scene(case.scene.kind).post(run_dir, params, DumpOutput(run_dir, snaps, cols, ids))
+        if _inserted(params):
+            triaxial.clumps_summary(run_dir, params, steps[0])
         controls = extras.get("controls", {})
         order = np.argsort(ids)
         with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
                          controls=controls.keys(), mass=mass, meta=meta) as w:
-            cols = json.loads((run_dir / "dump" / "columns.json").read_text())
-            snaps = list(read_binary_dump(segments, len(cols)))
-            steps = np.array([s for s, _ in snaps], dtype=np.int64)
             same = len({a.shape for _, a in snaps}) == 1
             if same and snaps:
                 block = np.stack([a for _, a in snaps])                  # (T, n, ncols)
@@ -202,14 +233,14 @@ class Liggghts(Engine):
                 if (sid == sid[0]).all():                                # sorted ids, none lost: one mapping
                     rows = order[np.searchsorted(ids[order], sid[0])]
                     arrays = {}
-                    for field, names in _COLUMNS.items():
+                    for field, names in COLUMNS.items():
                         if field in fields and names[0] in cols:
                             out = np.full((len(steps), len(ids), 3), np.nan)
                             out[:, rows] = block[:, :, [cols.index(c) for c in names]]
                             arrays[field] = out
                     if "stress" in fields:
                         out = np.full((len(steps), len(ids), 3, 3), np.nan)
-                        out[:, rows] = _stress_tensors(block, cols)
+                        out[:, rows] = stress_tensors(block, cols)
                         arrays["stress"] = out
                     ctl = {c: np.asarray(v, float)[:len(steps)] for c, v in controls.items()}
                     ctl = {c: np.pad(v, (0, len(steps) - len(v)), constant_values=np.nan) for c, v in ctl.items()}
@@ -223,14 +254,14 @@ class Liggghts(Engine):
             for step, a in snaps:                                        # atoms lost or inserted: frame by frame
                 rows = order[np.searchsorted(ids[order], a[:, cols.index("id")].astype(np.int64))]
                 arrays = {}
-                for field, names in _COLUMNS.items():
+                for field, names in COLUMNS.items():
                     if field in fields and names[0] in cols:
                         out = np.full((len(ids), 3), np.nan)
                         out[rows] = a[:, [cols.index(c) for c in names]]
                         arrays[field] = out
                 if "stress" in fields:
                     out = np.full((len(ids), 3, 3), np.nan)
-                    out[rows] = _stress_tensors(a, cols)
+                    out[rows] = stress_tensors(a, cols)
                     arrays["stress"] = out
                 contacts = read_contacts(run_dir / "dump" / f"contacts.{step}.txt") if case.output.contacts else None
                 k = w.t
@@ -242,22 +273,38 @@ class Liggghts(Engine):
         return run_dir / "frames.h5"
 
 
-_COLUMNS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
-            "angular_velocity": ("omegax", "omegay", "omegaz"), "force": ("fx", "fy", "fz"),
-            "torque": ("tqx", "tqy", "tqz")}
+class DumpOutput:
+    """The run's frames as a scene reads them (orchestrator.scenes.base.EngineOutput)."""
+
+    def __init__(self, run_dir: Path, snaps: list, cols: list[str], ids: np.ndarray):
+        self.run_dir = Path(run_dir)
+        self._snaps, self._cols = snaps, cols
+        self._row = {int(i): k for k, i in enumerate(ids)}
+        self._n = len(ids)
+        self.frame_steps = np.array([st for st, _ in snaps], dtype=np.int64)
+
+    def positions(self, k: int) -> np.ndarray:
+        a = self._snaps[k][1]
+        out = np.full((self._n, 3), np.nan)
+        rows = [self._row[int(i)] for i in a[:, self._cols.index("id")]]
+        out[rows] = a[:, [self._cols.index(c) for c in ("x", "y", "z")]]
+        return out
+
+    def wall_rows(self) -> np.ndarray | None:
+        return wall_rows(self.run_dir)
 
 
 def dump_columns(case) -> list[str]:
     """The per-atom columns the case needs in LIGGGHTS' dump (id first)."""
     cols = ["id"]
     for field in _fields(case):
-        cols += list(_COLUMNS.get(field, ()))
+        cols += list(COLUMNS.get(field, ()))
     if case.output.stress:
         cols += ["radius"] + [f"c_pstress[{k}]" for k in range(1, 7)]
     if getattr(getattr(case.scene, "particles", None), "shape", None) == "clumps":
         # inserted clumps: the body each member belongs to (fix multisphere keeps it in the molecule
         # id), the body's mass (every member carries it) and the member radius (particles.txt and
-        # the clump map are written from the first frame: scenes/triaxial.py liggghts_before_parse)
+        # the clump map are written from the first frame: engines/liggghts/triaxial.py)
         cols += ["mol", "mass"] + ([] if "radius" in cols else ["radius"])
     return cols
 
@@ -268,16 +315,41 @@ def _inserted(params) -> bool:
     return bool(sc.get("clumps") and sc["clumps"].get("liggghts"))
 
 
-def _stress_tensors(a: np.ndarray, cols: list[str]) -> np.ndarray:
-    """(n, 3, 3) particle stress [Pa] from ``compute stress/atom`` (stress x volume, components
-    xx yy zz xy xz yz, tension positive) divided by the sphere's volume."""
-    s = a[..., [cols.index(f"c_pstress[{k}]") for k in range(1, 7)]]
-    v = 4.0 / 3.0 * np.pi * a[..., cols.index("radius")] ** 3
-    s = s / v[..., None]
-    out = np.empty(a.shape[:-1] + (3, 3))
-    for k, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        out[..., i, j] = out[..., j, i] = s[..., k]
-    return out
+#: frames.h5 fields LIGGGHTS' dump custom gives (spheres: no orientation)
+FRAME_FIELDS = ("position", "velocity", "angular_velocity", "force", "torque", "stress")
+
+
+def _fields(case) -> list[str]:
+    return case.output.fields(FRAME_FIELDS)
+
+
+def _deck_beside(log: Path):
+    for name in ("resume.in", "deck.in"):
+        p = Path(log).parent / name
+        if p.exists():
+            return p
+    return None
+
+
+def write_data_file(path: Path, table_path: Path, lo, hi):
+    """Turn the particle table into a LIGGGHTS ``read_data`` file (atom_style granular:
+    ``id type diameter density x y z``; ``Velocities``: ``id vx vy vz wx wy wz``)."""
+    t = read_particle_table(table_path)
+    n = len(t["id"])
+    lo, hi = [float(v) for v in lo], [float(v) for v in hi]
+    f = lambda x: repr(float(x))  # full precision, plain Python floats
+    out = [f"LIGGGHTS data file written by orchestrator from {table_path.name}", "",
+           f"{n} atoms", "2 atom types", "",
+           f"{lo[0]!r} {hi[0]!r} xlo xhi", f"{lo[1]!r} {hi[1]!r} ylo yhi", f"{lo[2]!r} {hi[2]!r} zlo zhi",
+           "", "Atoms", ""]
+    for k in range(n):
+        x, y, z = t["position"][k]
+        out.append(f"{t['id'][k]} 1 {f(2 * t['radius'][k])} {f(t['density'][k])} {f(x)} {f(y)} {f(z)}")
+    out += ["", "Velocities", ""]
+    for k in range(n):
+        vx, vy, vz = t["velocity"][k]
+        out.append(f"{t['id'][k]} {f(vx)} {f(vy)} {f(vz)} 0.0 0.0 0.0")
+    write_text(path, "\n".join(out) + "\n")
 
 
 def read_contacts(path) -> dict | None:
@@ -296,152 +368,17 @@ def read_contacts(path) -> dict | None:
             "normal": normal, "fn": a[:, 9:12], "ft": a[:, 12:15]}
 
 
-def scan_binary_dump(raw: bytes, ncols: int):
-    """Yield (step, natoms, start, end, chunks) for each *complete* snapshot of a LIGGGHTS/LAMMPS
-    binary ``dump custom`` in file order, stopping at a snapshot cut short by a kill. Layout per
-    snapshot: int64 step, int64 natoms, int32 triclinic, 6 int32 boundary flags, 6 float64 box
-    bounds (+3 tilt factors if triclinic), int32 values per atom, int32 chunk count, then per
-    chunk an int32 length and that many float64."""
-    pos, end = 0, len(raw)
-    while pos + 100 <= end:
-        step, natoms = (int(x) for x in np.frombuffer(raw, np.int64, 2, pos))
-        tri = int(np.frombuffer(raw, np.int32, 1, pos + 16)[0])
-        q = pos + 16 + 4 + 24 + 48 + (24 if tri else 0)
-        if q + 8 > end:
-            return
-        size_one, nchunk = (int(x) for x in np.frombuffer(raw, np.int32, 2, q))
-        q += 8
-        if size_one != ncols:
-            raise EngineError(f"binary dump: snapshot at byte {pos} has {size_one} values per atom, expected {ncols}")
-        chunks = []
-        for _ in range(nchunk):
-            if q + 4 > end:
-                return
-            n = int(np.frombuffer(raw, np.int32, 1, q)[0])
-            q += 4
-            if q + 8 * n > end:
-                return
-            chunks.append((q, n))
-            q += 8 * n
-        yield step, natoms, pos, q, chunks
-        pos = q
-
-
-def dump_segments(run_dir) -> list[Path]:
-    """The binary frame dumps of a run in writing order: frames.bin, then one segment per resume
-    (frames.<restart step>.bin)."""
-    d = Path(run_dir) / "dump"
-    segs = sorted(d.glob("frames.*.bin"), key=lambda p: int(p.name.split(".")[1]))
-    first = d / "frames.bin"
-    return ([first] if first.exists() else []) + segs
-
-
-def read_binary_dump(paths, ncols: int):
-    """Yield (step, (n, ncols) array) for every complete snapshot of one or more binary dumps
-    (given in writing order), in step order; a step written twice (a resumed segment starts at
-    its restart step) is taken from its last occurrence."""
-    found = {}
-    for path in ([paths] if isinstance(paths, (str, Path)) else paths):
-        raw = Path(path).read_bytes()
-        for step, natoms, _, _, chunks in scan_binary_dump(raw, ncols):
-            parts = [np.frombuffer(raw, np.float64, n, q) for q, n in chunks]
-            a = parts[0] if len(parts) == 1 else np.concatenate(parts)
-            found[step] = a.reshape(natoms, ncols)
-    for step in sorted(found):
-        yield step, found[step]
-
-
-def truncate_binary_dump(path, ncols: int, max_step: int) -> int:
-    """Cut a binary dump after its last complete snapshot with step <= ``max_step`` (before a
-    resumed run appends to it); returns the new size in bytes."""
-    path = Path(path)
-    if not path.exists():
-        return 0
-    raw = path.read_bytes()
-    keep = 0
-    for step, _, _, stop, _ in scan_binary_dump(raw, ncols):
-        if step <= max_step:
-            keep = stop
-    with open(path, "r+b") as fh:
-        fh.truncate(keep)
-    return keep
-
-
-def _fields(case) -> list[str]:
-    o = case.output
-    return ["position"] + [f for f, on in (("velocity", o.velocity), ("angular_velocity", o.angular_velocity),
-                                           ("force", o.force), ("torque", o.torque)) if on] + \
-        (["stress"] if o.stress else [])
-
-
-def _scene_hook(case, name, *args) -> dict:
-    from orchestrator.scenes import scene_module
-    fn = getattr(scene_module(case.scene.kind), name, None)
-    return fn(*args) if fn else {}
-
-
-def _deck_beside(log: Path):
-    for name in ("resume.in", "deck.in"):
-        p = Path(log).parent / name
-        if p.exists():
-            return p
-    return None
-
-
-def _parse_numbers(body: bytes, ncols: int) -> np.ndarray:
-    """Whitespace-separated numbers -> (rows, ncols) float64, exactly (round trip)."""
-    if len(body) < 200_000:                         # small: a plain split is fastest
-        a = np.array(body.split(), dtype=np.float64)
-    else:                                            # pandas' C parser: ~10x faster, exact
-        import io
-        import pandas as pd
-        # usecols drops the empty column a trailing space would add, while parsing
-        a = pd.read_csv(io.BytesIO(body), sep=" ", header=None, usecols=range(ncols), dtype=np.float64,
-                        engine="c", skipinitialspace=True).to_numpy()
-    return a.reshape(-1, ncols)
-
-
-def read_dump(path) -> tuple[int, list[str], np.ndarray]:
-    """Read one LAMMPS/LIGGGHTS ``dump custom`` snapshot: (step, column names, (n, k) array)."""
-    with open(path, "rb") as fh:
-        raw = fh.read()
-    header_end = 0
-    lines = raw.split(b"\n", 9)
-    if not lines[0].startswith(b"ITEM: TIMESTEP"):
-        raise EngineError(f"{path}: not a dump custom file")
-    step = int(lines[1])
-    n = int(lines[3])
-    cols = lines[8].decode().split()[2:]
-    body = lines[9] if len(lines) > 9 else b""
-    if n == 0:
-        return step, cols, np.empty((0, len(cols)))
-    if n * len(cols) < 20000:                     # tiny: a plain split is fastest
-        a = np.array(body.split(), dtype=np.float64)
-    else:
-        a = _parse_numbers(body, len(cols)).ravel()
-    if a.size != n * len(cols):
-        raise EngineError(f"{path}: truncated dump ({a.size} numbers for {n} atoms x {len(cols)} columns)")
-    return step, cols, a.reshape(n, len(cols))
-
-
-def write_data_file(path: Path, table_path: Path, lo, hi):
-    """Turn the particle table into a LIGGGHTS ``read_data`` file (atom_style granular:
-    ``id type diameter density x y z``; ``Velocities``: ``id vx vy vz wx wy wz``)."""
-    from orchestrator.atomic import write_text
-    from orchestrator.particles_io import read_particle_table
-    t = read_particle_table(table_path)
-    n = len(t["id"])
-    lo, hi = [float(v) for v in lo], [float(v) for v in hi]
-    f = lambda x: repr(float(x))  # full precision, plain Python floats
-    out = [f"LIGGGHTS data file written by orchestrator from {table_path.name}", "",
-           f"{n} atoms", "2 atom types", "",
-           f"{lo[0]!r} {hi[0]!r} xlo xhi", f"{lo[1]!r} {hi[1]!r} ylo yhi", f"{lo[2]!r} {hi[2]!r} zlo zhi",
-           "", "Atoms", ""]
-    for k in range(n):
-        x, y, z = t["position"][k]
-        out.append(f"{t['id'][k]} 1 {f(2 * t['radius'][k])} {f(t['density'][k])} {f(x)} {f(y)} {f(z)}")
-    out += ["", "Velocities", ""]
-    for k in range(n):
-        vx, vy, vz = t["velocity"][k]
-        out.append(f"{t['id'][k]} {f(vx)} {f(vy)} {f(vz)} 0.0 0.0 0.0")
-    write_text(path, "\n".join(out) + "\n")
+def cut_wall_series(run_dir: Path, step: int) -> None:
+    """Cut the wall series a deck writes with ``fix ave/time ... file walls.<start step>.txt`` back to
+    the rows of steps <= ``step`` (a resumed run writes its own file from there; rows after the
+    restart step would appear twice); a file begun after ``step`` is removed."""
+    for f in Path(run_dir).glob("walls.*.txt"):
+        start = f.name.split(".")[1]
+        if start.isdigit() and int(start) > step:
+            f.unlink()
+            continue
+        lines = f.read_text().splitlines(keepends=True)
+        keep = [ln for ln in lines if ln.startswith("#") or not ln.split() or int(float(ln.split()[0])) <= step]
+        if len(keep) != len(lines):
+            from orchestrator.atomic import write_text
+            write_text(f, "".join(keep))

@@ -1,0 +1,31 @@
+"""The frame dumps of a LIGGGHTS run as the orchestrator's decks write them: ``dump/frames.bin``,
+then one segment ``dump/frames.<restart step>.bin`` per resume; the wall sampler's
+``walls.<n>.txt`` files."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def dump_segments(run_dir) -> list[Path]:
+    """The binary frame dumps of a run in writing order: frames.bin, then one segment per resume
+    (frames.<restart step>.bin)."""
+    d = Path(run_dir) / "dump"
+    segs = sorted(d.glob("frames.*.bin"), key=lambda p: int(p.name.split(".")[1]))
+    first = d / "frames.bin"
+    return ([first] if first.exists() else []) + segs
+
+
+def wall_rows(run_dir) -> np.ndarray | None:
+    """Rows of the deck's wall sampler (``fix ave/time`` into ``walls.<n>.txt``, one file per
+    run segment), files in numeric order, or None when there are none."""
+    files = sorted(Path(run_dir).glob("walls.*.txt"), key=lambda p: _number(p.name))
+    rows = [a for a in (np.loadtxt(f, comments="#", ndmin=2) for f in files) if a.size]
+    return np.vstack(rows) if rows else None
+
+
+def _number(name: str) -> int:
+    """The integer between the first two dots of a file name (-1 when there is none)."""
+    part = name.split(".")[1] if name.count(".") >= 2 else ""
+    return int(part) if part.isdigit() else -1

@@ -1,0 +1,205 @@
+"""An honest clock: engine run time predicted from throughput this project measured itself.
+
+Model (per engine and scene, fitted from completed runs)::
+
+    t_engine = t_start + steps · (a + b · n) / S(ranks)
+
+- ``t_start`` [s]: process start-up and set-up (reading the packing and meshes, building the
+  neighbour structures, the first dump), measured as engine time minus the engine's own loop time;
+- ``a`` [s/step]: cost per step independent of the particle count (mesh walls, servo and wall
+  computes, Python callbacks in YADE decks, dumps amortised over the run);
+- ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration);
+- ``S(ranks)`` = 1 + e (ranks − 1): the speed-up on several MPI ranks (LIGGGHTS) or threads (YADE),
+  with parallel efficiency ``e`` fitted from runs on more than one rank (0.7 until measured, stated
+  as ``assumed``).
+
+``a`` and ``b`` come from a non-negative least-squares fit of the loop time per step against n
+over the stored runs of one engine and scene (scipy.optimize.nnls). One run fixes only the sum:
+then ``a = 0`` and the fit is flagged ``one size``.
+
+The table lives in package data (``orchestrator/data/throughput.json``); a user table in
+``$ORCHESTRATOR_THROUGHPUT`` or ``$XDG_DATA_HOME/orchestrator/throughput.json`` takes precedence.
+``orchestrator clock refresh RUNS…`` refits it from the ``summary.json`` of complete runs.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import nnls
+
+__all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "samples_from_runs", "fit",
+           "refresh", "user_table_path", "ASSUMED_PARALLEL_EFFICIENCY"]
+
+#: parallel efficiency used until a run on several ranks/threads has been measured
+ASSUMED_PARALLEL_EFFICIENCY = 0.7
+
+
+@dataclass(frozen=True)
+class Throughput:
+    """Fitted cost model of one engine on one scene (see the module docstring)."""
+    startup_s: float
+    per_step_s: float
+    per_particle_step_s: float
+    parallel_efficiency: float = ASSUMED_PARALLEL_EFFICIENCY
+    runs: int = 0
+    note: str = ""
+
+    def engine_time(self, n_particles: int, steps: int, ranks: int = 1) -> float:
+        """Predicted engine wall time [s] of ``steps`` steps with ``n_particles`` on ``ranks``."""
+        speedup = 1.0 + self.parallel_efficiency * (max(int(ranks), 1) - 1)
+        return self.startup_s + steps * (self.per_step_s + self.per_particle_step_s * max(n_particles, 1)) / speedup
+
+
+@dataclass(frozen=True)
+class RunSample:
+    """What one complete run tells about throughput."""
+    engine: str
+    scene: str
+    n_particles: int
+    steps: int
+    ranks: int
+    engine_s: float
+    loop_s: float
+    source: str = field(default="", compare=False)
+
+
+def _package_table() -> dict:
+    try:
+        text = resources.files("orchestrator").joinpath("data/throughput.json").read_text()
+    except (FileNotFoundError, ModuleNotFoundError, OSError):
+        return {}
+    return json.loads(text)
+
+
+def user_table_path() -> Path:
+    """Where ``refresh`` writes and where a user table is looked up first."""
+    if os.environ.get("ORCHESTRATOR_THROUGHPUT"):
+        return Path(os.environ["ORCHESTRATOR_THROUGHPUT"])
+    base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
+    return base / "orchestrator" / "throughput.json"
+
+
+def load_table() -> dict:
+    """``{engine: {scene: Throughput}}``: the package table, overridden entry by entry by the
+    user table."""
+    table = _package_table()
+    user = user_table_path()
+    if user.is_file():
+        for eng, scenes in json.loads(user.read_text()).items():
+            table.setdefault(eng, {}).update(scenes)
+    return {eng: {sc: Throughput(**d) for sc, d in scenes.items() if not sc.startswith("_")}
+            for eng, scenes in table.items() if not eng.startswith("_")}
+
+
+def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, ranks: int = 1,
+                         table: dict | None = None) -> tuple[float, str]:
+    """(engine wall time [s], basis) for one run. ``basis`` says where the figures came from:
+    the fitted (engine, scene) entry, or the engine's entry of another scene, or nothing."""
+    table = load_table() if table is None else table
+    scenes = table.get(engine, {})
+    if scene in scenes:
+        tp = scenes[scene]
+        return tp.engine_time(n_particles, steps, ranks), f"measured on {tp.runs} {engine} {scene} run(s)"
+    if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
+        tp = max(scenes.values(), key=lambda t: t.per_particle_step_s + t.per_step_s / max(n_particles, 1))
+        return tp.engine_time(n_particles, steps, ranks), f"no {scene} run measured on {engine}: slowest other scene"
+    return float("nan"), f"no throughput measured for {engine}"
+
+
+def _sample(run_dir: Path) -> RunSample | None:
+    try:
+        s = json.loads((run_dir / "summary.json").read_text())
+        p = json.loads((run_dir / "params.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if s.get("status") != "complete" or s.get("resumed_from"):
+        return None          # a resumed run's engine time covers only its last part
+    wt = s.get("wall_time") or {}
+    if not isinstance(wt.get("engine"), (int, float)):
+        return None
+    sc = p.get("scene") or {}
+    n = int(sc.get("n") or len(sc.get("ids") or []) or 0)
+    steps = int(s.get("steps_run") or s.get("steps") or 0)
+    if n <= 0 or steps <= 0:
+        return None
+    kind = (p.get("scene_kind") or s.get("scene") or "")
+    if not kind:
+        try:
+            import yaml
+            kind = (yaml.safe_load((run_dir / "case.yaml").read_text()).get("scene") or {}).get("kind", "")
+        except (OSError, ValueError, AttributeError):
+            kind = ""
+    opts = s.get("engine_options") or {}
+    ranks = int(opts.get("mpi_ranks") if s.get("engine") == "liggghts" else opts.get("threads") or 1) if opts else 1
+    loop = wt.get("engine_loop") if isinstance(wt.get("engine_loop"), (int, float)) else wt["engine"]
+    return RunSample(s["engine"], kind, n, steps, max(ranks, 1), float(wt["engine"]), float(loop), str(run_dir))
+
+
+def samples_from_runs(paths) -> list[RunSample]:
+    """Every complete, un-resumed run under ``paths`` (run directories or runs/ trees)."""
+    out = []
+    for root in paths:
+        root = Path(root)
+        dirs = [root] if (root / "summary.json").exists() else [p.parent for p in root.rglob("summary.json")]
+        for d in sorted(dirs):
+            smp = _sample(d)
+            if smp is not None:
+                out.append(smp)
+    return out
+
+
+def fit(samples: list[RunSample]) -> Throughput:
+    """Fit one engine+scene's cost model to its runs (see the module docstring)."""
+    if not samples:
+        raise ValueError("no runs to fit")
+    single = [s for s in samples if s.ranks == 1] or samples
+    startup = float(np.median([max(s.engine_s - s.loop_s, 0.0) for s in single]))
+    # loop time per step, normalised to one rank with the efficiency fitted below (first pass: 1 rank only)
+    ns = np.array([s.n_particles for s in single], float)
+    tps = np.array([s.loop_s / s.steps for s in single])
+    sizes = len(set(ns.tolist()))
+    if sizes >= 2:
+        A = np.column_stack([np.ones_like(ns), ns])
+        (a, b), _ = nnls(A / tps[:, None], np.ones_like(tps))       # relative residuals
+        note = f"{sizes} sizes"
+    else:
+        a, b = 0.0, float(np.median(tps / ns))
+        note = "one size: per-step overhead not separated"
+    eff = ASSUMED_PARALLEL_EFFICIENCY
+    multi = [s for s in samples if s.ranks > 1]
+    if multi:
+        effs = []
+        for s in multi:
+            t1 = s.steps * (a + b * s.n_particles)
+            speedup = t1 / max(s.loop_s, 1e-12)
+            effs.append((speedup - 1) / (s.ranks - 1))
+        eff = float(np.clip(np.median(effs), 0.05, 1.0))
+        note += f"; parallel efficiency from {len(multi)} run(s)"
+    else:
+        note += "; parallel efficiency assumed"
+    return Throughput(startup, float(a), float(b), eff, len(samples), note)
+
+
+def refresh(paths, out: Path | None = None) -> dict:
+    """Refit the table from the complete runs under ``paths`` and write it (default: the user
+    table, :func:`user_table_path`). Returns ``{engine: {scene: Throughput}}`` of what was fitted."""
+    groups: dict = {}
+    for s in samples_from_runs(paths):
+        groups.setdefault((s.engine, s.scene), []).append(s)
+    fitted: dict = {}
+    for (eng, sc), smp in sorted(groups.items()):
+        fitted.setdefault(eng, {})[sc] = fit(smp)
+    out = Path(out) if out else user_table_path()
+    old = json.loads(out.read_text()) if out.is_file() else {}
+    for eng, scenes in fitted.items():
+        old.setdefault(eng, {}).update({sc: asdict(tp) for sc, tp in scenes.items()})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".partial")
+    tmp.write_text(json.dumps(old, indent=1, sort_keys=True) + "\n")
+    os.replace(tmp, out)
+    return fitted

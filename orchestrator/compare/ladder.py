@@ -1,0 +1,348 @@
+"""The cross-validation ladder: one case on every engine, physics term by physics term.
+
+Rungs (each adds one term to the one below; the top rung is the case as written)::
+
+    L0  Hertz–Mindlin + Coulomb, restitution damping (Tsuji; both engines realise it, LIGGGHTS
+        fed the inverse of its clipped law, docs/engines.md "Restitution")
+    L1  + the case's damping law (seed 000: γ_n = √(4/3 E* m*), realised by its substitute)
+    L2  + adhesion
+    L3  + rolling friction
+    L4  + torsional friction (the full case)
+
+A rung whose term the case does not ask for is the rung below again and is not run twice. Each
+rung runs on every engine for several packings (``seeds``), so that each observable has a
+run-to-run scatter per engine; an engine difference is *significant* only beyond
+2·√(s_A²/n_A + s_B²/n_B) (s the seed-to-seed standard deviation, n the number of seeds).
+The first rung where a significant difference exceeds its floor is where the engines *part*; the
+ladder lists the substitutes that rung brings in and the single-contact difference between them
+(:func:`single_contact_differences`, the same derivation as ``tests/test_shear_cell.py``).
+
+Runs go through :mod:`orchestrator.stability.executor` (local processes or a Dask cluster) and are
+reused when complete (same run hash), so a ladder can be extended with more seeds later.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..case import load_case
+from ..derive import derive
+from ..stability.executor import get_executor, run_task
+
+__all__ = ["Rung", "RUNGS", "rungs_for", "LadderResult", "run_ladder", "compare_rungs", "FLOORS",
+           "single_contact_differences", "plot_ladder"]
+
+
+@dataclass(frozen=True)
+class Rung:
+    name: str
+    adds: str               # the physics term this rung adds ("" for L0)
+    description: str
+
+
+RUNGS = (
+    Rung("L0", "", "Hertz–Mindlin + Coulomb, restitution damping realised by every engine"),
+    Rung("L1", "damping", "+ the case's damping law"),
+    Rung("L2", "adhesion", "+ adhesion"),
+    Rung("L3", "rolling", "+ rolling friction"),
+    Rung("L4", "torsion", "+ torsional friction (the full case)"),
+)
+
+#: relative floors (|A − B| / mean) per observable: issue #14 (L0: 5 % on μ_macro, band position
+#: and piston height, 10 % on band width; the full model: 10 % on μ_macro and band position)
+FLOORS = {
+    "L0": {"mu_macro": 0.05, "shearband_z": 0.05, "piston_z": 0.05, "shearband_width": 0.10},
+    "full": {"mu_macro": 0.10, "shearband_z": 0.10},
+    # triaxial (issue #14 item 5): σ1/σ3 within 5 %; ε_v within 0.005 absolute (handled below)
+    "triaxial": {"stress_ratio": 0.05},
+}
+EPS_V_FLOOR = 0.005
+
+
+def rungs_for(case_path) -> list[tuple[Rung, dict]]:
+    """The rungs of the ladder of ``case_path`` with the case overrides that realise each, lowest
+    first; rungs that add a term the case does not ask for are left out."""
+    case = load_case(case_path)
+    c = case.contact
+    params = derive(case)
+    e_full = ((params.get("scene") or {}).get("contact") or {}).get("restitution", {}).get("target", c.restitution)
+    present = {"damping": c.damping != "restitution", "adhesion": c.adhesion is not None,
+               "rolling": c.rolling is not None, "torsion": c.torsion is not None}
+    # walk down from the full case, dropping terms
+    drops = {"L4": {}, "L3": {"torsion": None}, "L2": {"torsion": None, "rolling": None},
+             "L1": {"torsion": None, "rolling": None, "adhesion": None}}
+    drops["L0"] = dict(drops["L1"], damping="restitution", restitution=float(e_full))
+    out = []
+    for rung in RUNGS:
+        if rung.adds and not present[rung.adds]:
+            continue
+        ov = {"contact": drops[rung.name]} if drops[rung.name] else {}
+        out.append((rung, ov))
+    return out
+
+
+@dataclass
+class LadderResult:
+    case: str
+    runs: pd.DataFrame                 # one row per (rung, engine, seed): status, run_dir, observables
+    stats: pd.DataFrame                # per (rung, engine, observable): mean, std, n
+    comparison: pd.DataFrame           # per (rung, pair, observable): difference, scatter, significant, floor, ok
+    parts_at: str | None               # the first rung where the engines part (None: they never do)
+    explanation: pd.DataFrame          # substitutes at that rung and the single-contact difference
+    files: dict = field(default_factory=dict)
+
+    def _repr_html_(self):
+        return (f"<b>ladder {self.case}</b>: engines part at {self.parts_at or 'no rung'}"
+                + self.comparison.to_html(index=False, float_format=lambda x: f"{x:.4g}"))
+
+
+_SCALARS = ("mu_macro", "shearband_z", "shearband_width", "piston_z", "peak_friction_angle_deg",
+            "residual_friction_angle_deg")
+
+
+def _flatten(obs: dict) -> dict:
+    """Scalar observables; vectors become named entries (``density_profile`` stays a list)."""
+    out = {}
+    for k, v in (obs or {}).items():
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            out[k] = float(v)
+        elif k == "density_profile":
+            out[k] = list(v)
+        elif isinstance(v, dict):
+            for kk, vv in v.items():
+                if isinstance(vv, (int, float)):
+                    out[f"{k}@{kk}"] = float(vv)
+    return out
+
+
+def run_ladder(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", scheduler=None, workers=None,
+               out_dir=None, progress=None, rungs=None) -> LadderResult:
+    """Run every rung of ``case_path`` (or only those named in ``rungs``) on every engine for every
+    seed (reusing complete runs), then compare (:func:`compare_rungs`) and write ``ladder.csv``,
+    ``ladder_runs.csv`` and ``ladder.png`` into ``out_dir`` (default ``runs/<case>/ladder``)."""
+    case = load_case(case_path)
+    engines = list(engines or case.engines)
+    todo = [(r, ov) for r, ov in rungs_for(case_path) if rungs is None or r.name in rungs]
+    tasks = []
+    for rung, ov in todo:
+        for seed in seeds:
+            for eng in engines:
+                tasks.append({"case": str(case_path), "overrides": dict(ov, seed=int(seed)), "engine": eng,
+                              "runs_root": str(runs_root), "analyze": False, "rung": rung.name, "seed": int(seed)})
+    rows = [None] * len(tasks)
+    ex = get_executor(scheduler, workers)
+    try:
+        for k, res in ex.run(run_task, [{kk: vv for kk, vv in t.items() if kk not in ("rung", "seed")} for t in tasks]):
+            t = tasks[k]
+            rows[k] = {"rung": t["rung"], "engine": t["engine"], "seed": t["seed"], "status": res.get("status"),
+                       "run_dir": res.get("run_dir"), "engine_time": res.get("engine_time"),
+                       "error": res.get("error") or res.get("observables_error"),
+                       **_flatten(res.get("observables"))}
+            if progress:
+                progress(rows[k])
+    finally:
+        ex.close()
+    runs = pd.DataFrame(rows)
+    res = compare_rungs(runs, [r.name for r, _ in todo])
+    res.case = case.name
+    res.explanation = explain(case_path, res.parts_at, runs)
+    out_dir = Path(out_dir) if out_dir else Path(runs_root) / case.name / "ladder"
+    res.files = write_ladder(res, out_dir)
+    return res
+
+
+def _stats(runs: pd.DataFrame) -> pd.DataFrame:
+    ok = runs[runs["status"] == "complete"]
+    rows = []
+    for (rung, eng), g in ok.groupby(["rung", "engine"], sort=False):
+        for col in g.columns:
+            if col in ("rung", "engine", "seed", "status", "run_dir", "engine_time", "error"):
+                continue
+            vals = g[col].dropna()
+            if not len(vals):
+                continue
+            if col == "density_profile":
+                prof = np.array([np.asarray(v, float) for v in vals])
+                rows.append({"rung": rung, "engine": eng, "observable": col, "mean": prof.mean(0).tolist(),
+                             "std": float(np.mean([np.linalg.norm(a - b) for a, b in combinations(prof, 2)]))
+                             if len(prof) > 1 else float("nan"), "n": len(prof)})
+                continue
+            v = vals.to_numpy(float)
+            rows.append({"rung": rung, "engine": eng, "observable": col, "mean": float(v.mean()),
+                         "std": float(v.std(ddof=1)) if len(v) > 1 else float("nan"), "n": len(v)})
+    return pd.DataFrame(rows, columns=["rung", "engine", "observable", "mean", "std", "n"])
+
+
+def _floor(rung: str, top: str, obs: str) -> float | None:
+    if obs.startswith("stress_ratio"):
+        return FLOORS["triaxial"]["stress_ratio"]
+    if rung == "L0" and obs in FLOORS["L0"]:
+        return FLOORS["L0"][obs]
+    if rung == top and obs in FLOORS["full"]:
+        return FLOORS["full"][obs]
+    return None
+
+
+def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
+    """Engine-vs-engine differences per rung and observable, with their significance against the
+    seed-to-seed scatter and the floors of :data:`FLOORS`."""
+    stats = _stats(runs)
+    top = rung_order[-1] if rung_order else "L4"
+    rows = []
+    for rung in rung_order:
+        st = stats[stats["rung"] == rung]
+        engines = list(dict.fromkeys(st["engine"]))
+        for a, b in combinations(engines, 2):
+            for obs in dict.fromkeys(st["observable"]):
+                ra = st[(st.engine == a) & (st.observable == obs)]
+                rb = st[(st.engine == b) & (st.observable == obs)]
+                if not len(ra) or not len(rb):
+                    continue
+                ra, rb = ra.iloc[0], rb.iloc[0]
+                if obs == "density_profile":
+                    pa, pb = np.asarray(ra["mean"]), np.asarray(rb["mean"])
+                    diff = float(np.linalg.norm(pa - pb) / max(np.linalg.norm(0.5 * (pa + pb)), 1e-300))
+                    scatter = float(np.nanmax([ra["std"], rb["std"]]) / max(np.linalg.norm(0.5 * (pa + pb)), 1e-300))
+                    absdiff = diff
+                else:
+                    ma, mb = float(ra["mean"]), float(rb["mean"])
+                    absdiff = abs(ma - mb)
+                    scale = 0.5 * (abs(ma) + abs(mb))
+                    diff = absdiff / scale if scale > 0 else float("nan")
+                    sem2 = (ra["std"] ** 2 / ra["n"] if np.isfinite(ra["std"]) else np.nan) + \
+                           (rb["std"] ** 2 / rb["n"] if np.isfinite(rb["std"]) else np.nan)
+                    scatter = float(2 * math.sqrt(sem2) / scale) if np.isfinite(sem2) and scale > 0 else float("nan")
+                significant = bool(np.isfinite(scatter) and diff > scatter) if np.isfinite(diff) else False
+                floor = _floor(rung, top, obs)
+                if obs.startswith("volumetric_strain"):
+                    floor_ok = absdiff <= EPS_V_FLOOR
+                    floor = EPS_V_FLOOR
+                else:
+                    floor_ok = None if floor is None else bool(diff <= floor)
+                # a difference within the scatter is not a disagreement, whatever its size
+                ok = None if floor_ok is None else bool(floor_ok or not significant)
+                rows.append({"rung": rung, "engines": f"{a} vs {b}", "observable": obs,
+                             f"mean A": ra["mean"] if obs != "density_profile" else np.nan,
+                             f"mean B": rb["mean"] if obs != "density_profile" else np.nan,
+                             "relative difference": diff, "scatter (2 sem, relative)": scatter,
+                             "significant": significant, "floor": floor, "ok": ok})
+    comp = pd.DataFrame(rows)
+    parts = None
+    for rung in rung_order:
+        sel = comp[(comp["rung"] == rung)] if len(comp) else comp
+        if len(sel) and ((sel["significant"]) & (sel["relative difference"] > sel["floor"].fillna(0.05))).any():
+            parts = rung
+            break
+    return LadderResult("", runs, stats, comp, parts, pd.DataFrame())
+
+
+def single_contact_differences(case_path) -> pd.DataFrame:
+    """Single-contact differences between the engines' substitutes and the seed's law for one
+    median pair (r_eff = x50/4) at 0.1, 1 and 10 times the overlap expected under the case's load
+    (the numbers the decks use, from :func:`orchestrator.derive.derive`). Rows: term, engine,
+    mechanism, ratio to the seed's value at each overlap."""
+    case = load_case(case_path)
+    params = derive(case)
+    c = (params.get("scene") or {}).get("contact") or {}
+    psd = getattr(case.scene, "psd", None)
+    if not c or psd is None or "expected_overlap" not in c:
+        return pd.DataFrame(columns=["term", "engine", "mechanism", "ξ/ξ_σ = 0.1", "ξ/ξ_σ = 1", "ξ/ξ_σ = 10"])
+    R = psd.median / 2
+    r_eff = R / 2
+    scales = np.array([0.1, 1.0, 10.0])
+    xs = c["expected_overlap"] * scales
+    rows = []
+    if "adhesion_force" in c:
+        d = 2 * R - xs
+        area = np.abs(np.pi / 4 * ((d - 2 * R) * d * d * (d + 2 * R)) / d ** 2)   # sphere-intersection disc
+        if "liggghts_cohesion_energy_density" in c:
+            rows.append(("adhesion", "liggghts", "sjkr k·A(ξ), k matched at ξ_σ",
+                         *(c["liggghts_cohesion_energy_density"] * area / c["adhesion_force"])))
+        if "yade_gamma" in c:
+            rows.append(("adhesion", "yade", "DMT 4πγ r_eff (constant)",
+                         *([4 * math.pi * c["yade_gamma"] * r_eff / c["adhesion_force"]] * 3)))
+    if "rolling_coefficient" in c:
+        lever_seed = np.sqrt(2 * r_eff * xs)
+        rows.append(("rolling limit", "liggghts", "epsd2 μ_r r_eff |F| (μ_r frozen at ξ_σ)",
+                     *(c["rolling_coefficient"] * r_eff / lever_seed)))
+        if "yade_eta" in c:
+            rows.append(("rolling limit", "yade", "Mindlin moment η R̄ |F|", *(c["yade_eta"] * R / lever_seed)))
+    if "torsion_coefficient" in c:
+        lever_seed = c["torsion_coefficient"] * r_eff
+        if "rolling_coefficient" in c:
+            rows.append(("torsion limit", "liggghts", "epsd2 torsion shares the rolling limit",
+                         *([c["rolling_coefficient"] * r_eff / lever_seed] * 3)))
+        rows.append(("torsion limit", "yade", "Mindlin ktwist: elastic, no limit", *([math.inf] * 3)))
+    return pd.DataFrame(rows, columns=["term", "engine", "mechanism", "ξ/ξ_σ = 0.1", "ξ/ξ_σ = 1", "ξ/ξ_σ = 10"])
+
+
+def explain(case_path, rung: str | None, runs: pd.DataFrame) -> pd.DataFrame:
+    """The substitutes the parting rung brings in (from the runs' summaries) and their
+    single-contact difference to the seed's law."""
+    if rung is None:
+        return pd.DataFrame()
+    term = next(r.adds for r in RUNGS if r.name == rung)
+    subs = []
+    for _, row in runs[(runs["rung"] == rung) & (runs["status"] == "complete")].drop_duplicates("engine").iterrows():
+        try:
+            s = json.loads((Path(row["run_dir"]) / "summary.json").read_text())
+        except (OSError, ValueError, TypeError):
+            continue
+        for sub in s.get("substitutions") or []:
+            subs.append({"term": sub["feature"], "engine": row["engine"], "mechanism": sub["mechanism"],
+                         "note": sub.get("note", "")})
+    sc = single_contact_differences(case_path)
+    key = {"adhesion": "adhesion", "rolling": "rolling limit", "torsion": "torsion limit"}.get(term)
+    if key is not None and len(sc):
+        sc = sc[sc["term"] == key]
+    else:
+        sc = sc.iloc[0:0]
+    return pd.concat([pd.DataFrame(subs), sc], ignore_index=True)
+
+
+def plot_ladder(res: LadderResult):
+    """Relative engine difference per rung and observable, with the scatter band and floors."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    comp = res.comparison
+    fig, ax = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
+    if len(comp):
+        rungs = list(dict.fromkeys(comp["rung"]))
+        x = {r: k for k, r in enumerate(rungs)}
+        for obs, g in comp.groupby("observable", sort=False):
+            xs = [x[r] for r in g["rung"]]
+            ax.plot(xs, 100 * g["relative difference"], "o-", label=obs)
+            ax.fill_between(xs, 0, 100 * g["scatter (2 sem, relative)"].fillna(0), alpha=0.08)
+        ax.set_xticks(range(len(rungs)), rungs)
+        if res.parts_at:
+            ax.axvline(x[res.parts_at], color="k", ls=":", lw=1)
+            ax.text(x[res.parts_at], ax.get_ylim()[1], " engines part", va="top", fontsize=8)
+    ax.axhline(5, color="grey", lw=0.8, ls="--")
+    ax.axhline(10, color="grey", lw=0.8, ls="--")
+    ax.set_ylabel("|A − B| / mean [%]")
+    ax.set_title(f"cross-validation ladder: {res.case}", fontsize=10)
+    ax.legend(fontsize=7, ncol=2)
+    return fig
+
+
+def write_ladder(res: LadderResult, out_dir: Path) -> dict:
+    from ..atomic import write_text
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {"comparison": write_text(out_dir / "ladder.csv", res.comparison.to_csv(index=False)),
+             "runs": write_text(out_dir / "ladder_runs.csv", res.runs.to_csv(index=False)),
+             "stats": write_text(out_dir / "ladder_stats.csv", res.stats.to_csv(index=False))}
+    if len(res.explanation):
+        files["explanation"] = write_text(out_dir / "ladder_explanation.csv", res.explanation.to_csv(index=False))
+    fig = plot_ladder(res)
+    png = out_dir / "ladder.png"
+    fig.savefig(png, dpi=110)
+    files["plot"] = png
+    return {k: str(v) for k, v in files.items()}

@@ -1,0 +1,134 @@
+"""The one interface between a scene and the rest: :class:`Scene`.
+
+A scene knows the physics and the protocol of one experiment, never an engine's file formats.
+It is registered under the entry-point group ``orchestrator.scenes`` (pyproject.toml) and found
+through :func:`orchestrator.registry.get_scene`. Engines hand it their output through the neutral
+:class:`EngineOutput` (frame steps, particle positions per frame, the wall sampler's rows); the
+scene turns that into per-frame controls, wall series and its summary (:meth:`Scene.post`).
+
+Case terms a scene does not realise in any engine's deck are refused when the case is loaded
+(:meth:`Scene.refused_terms`), naming the field and the scene: nothing a case asks for is dropped
+silently (docs/architecture.md).
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from pathlib import Path
+from typing import Any, ClassVar, Mapping, Protocol
+
+import numpy as np
+
+from ..particles_io import write_particle_table
+from ..registry import get_scene, scene_kinds
+
+#: optional case terms a scene may realise, with the test that tells whether a case asks for it
+#: (a term whose test is true must be in the scene's ``honoured`` set, else the case is refused)
+OPTIONAL_TERMS: dict[str, Any] = {
+    "contact.adhesion": lambda case: case.contact.adhesion is not None,
+    "contact.rolling": lambda case: case.contact.rolling is not None,
+    "contact.torsion": lambda case: case.contact.torsion is not None,
+    "contact.damping: seed000": lambda case: case.contact.damping == "seed000",
+    "contact.tangential_stiffness_ratio": lambda case: case.contact.tangential_stiffness_ratio is not None,
+    "gravity": lambda case: case.gravity != 0,
+    "output.contacts": lambda case: bool(case.output.contacts),
+    "output.stress": lambda case: bool(case.output.stress),
+    "initial_packing": lambda case: case.initial_packing is not None,
+}
+
+
+class EngineOutput(Protocol):
+    """What an engine adapter hands a scene after a run (engines/*: their own readers)."""
+
+    run_dir: Path
+    #: the step of every frame written, ascending
+    frame_steps: np.ndarray
+
+    def positions(self, k: int) -> np.ndarray:
+        """(n, 3) positions [m] of frame k, rows in the order of the run's particles.txt (NaN: lost)."""
+
+    def wall_rows(self) -> np.ndarray | None:
+        """The deck's wall-sampler rows (columns as the scene's ``wall_columns``), step-sorted
+        as written, or None when the deck wrote none."""
+
+
+class Scene(ABC):
+    """One experiment. Subclasses set the class attributes and implement the abstract methods.
+
+    Attributes
+    ----------
+    kind : the case's ``scene.kind`` and the template name ``templates/<engine>/<kind>.*.j2``.
+    section : the pydantic model of the case's ``scene:`` section (``kind: Literal[kind]``).
+    honoured : the optional case terms (keys of :data:`OPTIONAL_TERMS`) that every engine's deck
+        of this scene realises; a case asking for another is refused at validation.
+    controls : per-frame control values written to frames.h5, name -> unit ("1" dimensionless);
+        the one declaration frames, analysis, compare and convergence use.
+    series_columns : columns of the neutral time-series file every engine's deck writes (empty:
+        none), in :attr:`series_file`.
+    wall_columns : columns of the wall sampler's rows (:meth:`EngineOutput.wall_rows`).
+    observables : convergence observables (orchestrator.stability.observables) for this scene.
+    default_analyses : analysis specs a report runs when the case lists none.
+    """
+
+    kind: ClassVar[str]
+    section: ClassVar[type]
+    honoured: ClassVar[frozenset[str]] = frozenset()
+    controls: ClassVar[Mapping[str, str]] = {}
+    series_file: ClassVar[str | None] = None
+    series_columns: ClassVar[tuple[str, ...]] = ()
+    wall_columns: ClassVar[tuple[str, ...]] = ()
+    observables: ClassVar[tuple[str, ...]] = ()
+    default_analyses: ClassVar[tuple[str, ...]] = ()
+
+    # -- validation ------------------------------------------------------------------------
+    def refused_terms(self, case) -> list[str]:
+        """One message per case term this scene does not realise (empty: the case is accepted)."""
+        out = []
+        for term, asked in OPTIONAL_TERMS.items():
+            if term not in self.honoured and asked(case):
+                out.append(f"{term.split(':')[0]}: the {self.kind} scene does not realise '{term}' in any "
+                           f"engine's deck, so the run would silently lack it; remove it from the case "
+                           f"(scenes that realise it: {', '.join(_scenes_honouring(term)) or 'none'})")
+        return out
+
+    # -- physics ---------------------------------------------------------------------------
+    @abstractmethod
+    def required_features(self, case) -> list[str]:
+        """Physics features the engines must offer (vocabulary: engines.base.FEATURES)."""
+
+    @abstractmethod
+    def derive(self, case, common: dict) -> dict:
+        """The scene's numbers for the templates (SI), from the case and the common parameters."""
+
+    @abstractmethod
+    def max_velocity(self, case) -> float:
+        """Largest expected relative particle speed [m/s] (Hertz time-step limit)."""
+
+    def size_range(self, case) -> tuple[float, float]:
+        """(r_min, r_max) [m] of the particles; default: one ``radius``."""
+        r = case.scene.radius
+        return r, r
+
+    def stability_inputs(self, case, params: dict) -> dict:
+        """Wall speeds [m/s], confining stress [Pa], skin [m], height [m], wall force target [N]
+        for orchestrator.stability.checks (missing keys: neutral defaults)."""
+        return {}
+
+    # -- files -----------------------------------------------------------------------------
+    def prepare(self, case, params: dict, run_dir: Path) -> dict:
+        """Write the shared input files (particle table, meshes) into ``run_dir``; return their
+        paths by name for the templates."""
+        sc = params["scene"]
+        if not (Path(run_dir) / "particles.txt").exists():
+            write_particle_table(Path(run_dir) / "particles.txt", sc["ids"], sc["radius"], case.material.density,
+                                 sc["position"], sc.get("velocity"))
+        return {}
+
+    def post(self, run_dir: Path, params: dict, output: EngineOutput) -> dict:
+        """Controls per frame (``{"controls": {name: array}}``, names as :attr:`controls`) and wall
+        series (``{"walls": {name: {"time": ..., ...}}}``) from an engine's output; may write
+        ``scene_summary.json`` into ``run_dir``."""
+        return {"controls": {}}
+
+
+def _scenes_honouring(term: str) -> list[str]:
+    return [k for k in scene_kinds() if term in get_scene(k).honoured]

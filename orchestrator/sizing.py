@@ -1,0 +1,121 @@
+"""Sizing a case before any work: particle count, steps, frames, memory, disk and engine time,
+from the derived parameters alone (no packing, no meshes), and the refusal of a case that does
+not fit the machine.
+
+Memory per particle (order of magnitude, the engines' own data structures): LIGGGHTS keeps an
+atom (~40 doubles with the granular fix properties), a half neighbour list of ~15 neighbours and
+the tangential contact history (3 doubles per contact); YADE a Body, State, Shape and Material
+object per sphere and ~6 Interactions of ~0.5 kB (IGeom + IPhys). The orchestrator's own packing
+holds positions, radii and a grid index (~0.2 kB per particle), and the LIGGGHTS parse stacks every
+frame of the dump in memory once (T x N x columns doubles). These figures decide refusal only by
+orders of magnitude: a case is refused when it needs more memory than the machine has.
+"""
+from __future__ import annotations
+
+import os
+
+#: engine memory per particle [bytes] (see the module docstring) and a fixed process overhead
+ENGINE_BYTES_PER_PARTICLE = {"liggghts": 2_000, "yade": 5_000}
+ENGINE_BASE_BYTES = {"liggghts": 50e6, "yade": 300e6}
+#: the orchestrator's packing and particle table [bytes per particle]
+PACKING_BYTES_PER_PARTICLE = 200
+#: fraction of the machine's memory a run may plan to use
+MEMORY_FRACTION = 0.8
+
+
+class SizeError(ValueError):
+    """A case too big for this machine (refused unless forced)."""
+
+
+def machine_memory() -> int:
+    """Total memory of this machine [bytes] (/proc/meminfo MemTotal)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemTotal:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def frame_count(params: dict) -> int:
+    """Frames the run writes: the scene's frame steps, else one per ``dump_every`` steps."""
+    sc = params["scene"]
+    if sc.get("frame_steps"):
+        return len(sc["frame_steps"])
+    steps = sc.get("total_steps", sc["steps"])
+    return steps // max(int(sc.get("dump_every", steps) or steps), 1) + 1
+
+
+def estimate(case, params: dict, engine: str) -> dict:
+    """Size of one run: ``particles``, ``steps``, ``frames``, ``memory_bytes`` (the larger of the
+    engine and the parse), ``disk_bytes`` (frames.h5), ``engine_time_s``."""
+    from .runner import estimate_wall_time
+    sc = params["scene"]
+    n = int(sc.get("n", len(sc.get("ids", []))))
+    steps = int(sc.get("total_steps", sc["steps"]))
+    frames = frame_count(params)
+    o = case.output
+    cols = 1 + 3 * (1 + o.velocity + o.angular_velocity + o.force + o.torque) + (7 if o.stress else 0)
+    frames_bytes = frames * n * cols * 8
+    engine_mem = ENGINE_BASE_BYTES[engine] + n * ENGINE_BYTES_PER_PARTICLE[engine]
+    parse_mem = 2 * frames_bytes if engine == "liggghts" else frames_bytes
+    return {"engine": engine, "particles": n, "steps": steps, "frames": frames,
+            "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
+            "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),
+            "disk_bytes": int(frames_bytes), "engine_time_s": float(estimate_wall_time(case, params, engine))}
+
+
+def fmt_bytes(b: float) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if b < 1000 or unit == "TB":
+            return f"{b:.0f} {unit}" if unit == "B" else f"{b:.1f} {unit}"
+        b /= 1000
+    return f"{b:.1f} TB"  # pragma: no cover
+
+
+def fmt_s(seconds: float) -> str:
+    if seconds < 1:
+        return f"{seconds * 1000:.0f} ms"
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    if seconds < 172800:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.1f} days"
+
+
+def describe(size: dict) -> str:
+    return (f"{size['particles']:,} particles, {size['steps']:,} steps, {size['frames']} frames; memory "
+            f"~{fmt_bytes(size['memory_bytes'])}, frames.h5 ~{fmt_bytes(size['disk_bytes'])}, engine time "
+            f"~{fmt_s(size['engine_time_s'])}")
+
+
+def problems(case, size: dict) -> list[str]:
+    """Why the run does not fit this machine (empty when it does), and warnings prefixed 'warning:'."""
+    out = []
+    mem = machine_memory()
+    if size["memory_bytes"] > MEMORY_FRACTION * mem:
+        out.append(f"needs ~{fmt_bytes(size['memory_bytes'])} of memory for {size['particles']:,} particles; this "
+                   f"machine has {fmt_bytes(mem)}")
+    timeout = case.engine_options.timeout
+    if size["engine_time_s"] > timeout:
+        out.append(f"warning: the estimated engine time {fmt_s(size['engine_time_s'])} exceeds "
+                   f"engine_options.timeout = {fmt_s(timeout)}; the run would be stopped there (raise the timeout "
+                   "or shrink the case)")
+    return out
+
+
+def check_fits(case, size: dict, force: bool = False) -> list[str]:
+    """Raise :class:`SizeError` when the case does not fit (unless ``force``); return warnings."""
+    probs = problems(case, size)
+    hard = [p for p in probs if not p.startswith("warning:")]
+    if hard and not force:
+        src = case.source or case.name
+        raise SizeError(f"{src}: case '{case.name}' on {size['engine']} is too big for this machine: "
+                        + "; ".join(hard) + f" ({describe(size)}). Shrink the case (scene size, particle size "
+                        "distribution) or give --force to run it anyway")
+    return [p for p in probs if p.startswith("warning:")] + (["warning: forced past: " + "; ".join(hard)]
+                                                             if hard else [])

@@ -1,0 +1,66 @@
+"""The run-time model (orchestrator.clock): the fit recovers known costs, and refresh reads real
+summary.json/params.json files of complete runs."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from orchestrator.clock import RunSample, Throughput, estimate_engine_time, fit, load_table, refresh
+
+
+def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
+    out = []
+    for n in sizes:
+        steps = 10_000
+        loop = steps * (a + b * n) / (1 + eff * (ranks - 1))
+        out.append(RunSample("liggghts", "shear_cell", n, steps, ranks, loop + startup, loop))
+    return out
+
+
+def test_fit_separates_per_step_and_per_particle_costs():
+    tp = fit(_runs(2e-4, 1e-6, 0.5, [300, 1000, 4000]))
+    assert tp.per_step_s == pytest.approx(2e-4, rel=1e-6)
+    assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-6)
+    assert tp.startup_s == pytest.approx(0.5)
+    assert tp.engine_time(2000, 1000) == pytest.approx(0.5 + 1000 * (2e-4 + 2e-3))
+
+
+def test_parallel_efficiency_is_fitted_from_multi_rank_runs():
+    tp = fit(_runs(0.0, 1e-6, 0.5, [300, 1000]) + _runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=0.8))
+    assert tp.parallel_efficiency == pytest.approx(0.8, rel=1e-6)
+    assert "parallel efficiency from 1 run" in tp.note
+
+
+def test_one_size_says_so():
+    tp = fit(_runs(0.0, 1e-6, 0.2, [500]))
+    assert tp.per_step_s == 0 and "one size" in tp.note
+
+
+def test_unknown_scene_falls_back_to_the_slowest_known_one():
+    table = {"yade": {"impact": Throughput(1.0, 0.0, 1e-7), "triaxial": Throughput(2.0, 1e-3, 5e-6)}}
+    t, basis = estimate_engine_time("yade", "shear_cell", 1000, 100, table=table)
+    assert t == pytest.approx(2.0 + 100 * (1e-3 + 5e-3)) and "slowest" in basis
+    t, basis = estimate_engine_time("lammps", "impact", 10, 10, table=table)
+    assert np.isnan(t) and "no throughput" in basis
+
+
+def test_refresh_from_run_directories(tmp_path, monkeypatch):
+    runs = tmp_path / "runs"
+    for k, (n, steps, eng_s, loop_s) in enumerate([(300, 20000, 7.0, 6.0), (1000, 20000, 21.0, 20.0)]):
+        d = runs / "c" / f"liggghts-{k}"
+        d.mkdir(parents=True)
+        (d / "summary.json").write_text(json.dumps({
+            "engine": "liggghts", "status": "complete", "steps": steps, "steps_run": steps,
+            "wall_time": {"engine": eng_s, "engine_loop": loop_s}}))
+        (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
+        (d / "case.yaml").write_text("scene: {kind: plane_shear}\n")
+    out = tmp_path / "tp.json"
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(out))
+    fitted = refresh([runs])
+    tp = fitted["liggghts"]["plane_shear"]
+    # loop/step = 3e-4 and 1e-3 s at n = 300 and 1000: a = 0, b = 1e-6
+    assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-6) and tp.per_step_s == pytest.approx(0, abs=1e-12)
+    assert tp.startup_s == pytest.approx(1.0)
+    assert load_table()["liggghts"]["plane_shear"] == tp

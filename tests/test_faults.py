@@ -1,0 +1,314 @@
+"""Every fault a new user met (issue #16) ends in one message naming the file or field, what is wrong
+and the fix, with exit status 2 for bad input and 1 for a failed run, and no traceback; files follow
+the user's umask; a damaged or stale run is detected."""
+from __future__ import annotations
+
+import json
+import os
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.frames import write_frames
+
+REPO = Path(__file__).resolve().parents[1]
+CASES = REPO / "cases"
+IMPACT = CASES / "verification" / "chung_ooi_4_oblique.yaml"        # 17 spheres, ~1 s per engine
+SMOKE = CASES / "shear_cell_smoke.yaml"
+NOBODY = 65534
+
+
+class Out:
+    def __init__(self, returncode, stdout, stderr):
+        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
+
+
+def cli(*args, as_nobody=False, timeout=600, env=None):
+    """``orchestrator ARGS``: in this process (the imports are paid once), or as an unprivileged user
+    in a subprocess when the tests run as root (root ignores directory permissions)."""
+    args = [str(a) for a in args]
+    if as_nobody:
+        pre = ["setpriv", f"--reuid={NOBODY}", f"--regid={NOBODY}", "--clear-groups"] if os.geteuid() == 0 else []
+        r = subprocess.run(pre + [sys.executable, "-m", "orchestrator", *args], capture_output=True, text=True,
+                           timeout=timeout, cwd="/", env=dict(os.environ, **(env or {})))
+        return Out(r.returncode, r.stdout, r.stderr)
+    import contextlib
+    import io
+    from orchestrator.cli import main
+    o, e = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
+        try:
+            code = main(args)
+        except SystemExit as exc:
+            code = exc.code
+    return Out(code, o.getvalue(), e.getvalue())
+
+
+def one_message(out, status: int, *words: str):
+    """Exit ``status``, no traceback, and every one of ``words`` in stderr."""
+    assert out.returncode == status, (out.returncode, out.stdout[-2000:], out.stderr[-2000:])
+    assert "Traceback" not in out.stderr + out.stdout, out.stderr
+    for w in words:
+        assert w in out.stderr, (w, out.stderr)
+
+
+def case_file(tmp_path: Path, name: str, body: str, base: Path = SMOKE) -> Path:
+    p = tmp_path / name
+    p.write_text(f"extends: {base}\n{body}")
+    return p
+
+
+def shared_dir(tmp_path: Path) -> Path:
+    """A directory an unprivileged user may write into (for the permission faults)."""
+    d = tmp_path / "shared"
+    d.mkdir()
+    for q in (tmp_path, d):
+        q.chmod(0o777)
+    return d
+
+
+def synthetic_run(run_dir: Path, scene_kind: str = "shear_cell", n_frames: int = 4) -> Path:
+    """A run directory holding a frames.h5 of a few frames (a lattice drifting in x) and its case."""
+    rng = np.random.default_rng(1)
+    n = 27
+    g = np.stack(np.meshgrid(*[np.arange(3.0)] * 3, indexing="ij"), -1).reshape(-1, 3) * 2e-5
+    pos = np.stack([g + [k * 1e-6, 0, 0] + rng.normal(0, 1e-8, g.shape) for k in range(n_frames)])
+    case = {"name": f"syn_{scene_kind}", "scene": {"kind": scene_kind, "cell_diameter": "0.3 mm"},
+            "material": {"density": "2500 kg/m^3"}}
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_frames(run_dir / "frames.h5", np.arange(1, n + 1), np.full(n, 1e-5), np.arange(n_frames) * 1e-3, pos,
+                 step=np.arange(n_frames) * 100, meta={"case": case, "engine": "synthetic"})
+    (run_dir / "case.yaml").write_text("analysis: [displacements]\n")
+    return run_dir
+
+
+# --------------------------------------------------------------------------------- case files
+def test_binary_file_as_case(tmp_path):
+    p = tmp_path / "scan.yaml"
+    p.write_bytes(bytes(range(256)) * 4)
+    one_message(cli("validate", p), 2, str(p), "not a text file", "give a YAML case file")
+
+
+def test_directory_as_case(tmp_path):
+    one_message(cli("run", tmp_path, "--dry-run"), 2, str(tmp_path), "is a directory", "give a YAML case file")
+
+
+def test_negative_friction_and_list_restitution_say_the_fix(tmp_path):
+    p = case_file(tmp_path, "bad.yaml", "contact: {friction: -0.1, restitution: [0.5, 0.6]}\n")
+    out = cli("validate", p)
+    one_message(out, 2, str(p), "contact.friction", "set contact.friction to a value of at least 0",
+                "contact.restitution", "takes one value, not a list")
+
+
+def test_misspelt_scene_field_gets_did_you_mean(tmp_path):
+    p = case_file(tmp_path, "typo.yaml", "scene: {psd: {medain: 30 um}}\n")
+    one_message(cli("validate", p), 2, "scene.psd.medain", "did you mean 'median'")
+
+
+def test_error_in_parent_case_is_reported_against_the_parent(tmp_path):
+    parent = case_file(tmp_path, "parent.yaml", "contact: {friction: -0.2}\n")
+    child = tmp_path / "child.yaml"
+    child.write_text("extends: parent.yaml\nname: child\n")
+    out = cli("validate", child)
+    one_message(out, 2, str(parent), "contact.friction")
+    assert out.stderr.index(str(parent)) < out.stderr.index("contact.friction")
+
+
+def _safe_fraction(msg: str) -> float:
+    import re
+    m = re.search(r"timestep\.fraction <= ([0-9.]+)", msg)
+    assert m, msg
+    return float(m.group(1))
+
+
+def test_time_step_fraction_limit_is_one_figure_and_it_holds(tmp_path):
+    """Every refusal names the same largest safe fraction for the case, that fraction is accepted
+    and a little more is refused (it read '<= 0.3' for 5 while 0.65 was accepted)."""
+    figs = []
+    for f in (5, 1.5, 0.9):
+        out = cli("validate", case_file(tmp_path, f"f{f}.yaml", f"timestep: {{fraction: {f}}}\n"))
+        one_message(out, 2, "timestep.fraction <=")
+        figs.append(_safe_fraction(out.stderr))
+    assert len(set(figs)) == 1, figs
+    ok = cli("validate", case_file(tmp_path, "ok.yaml", f"timestep: {{fraction: {figs[0]}}}\n"))
+    assert ok.returncode == 0, ok.stderr
+    over = cli("validate", case_file(tmp_path, "over.yaml", f"timestep: {{fraction: {figs[0] + 0.01}}}\n"))
+    one_message(over, 2, f"timestep.fraction <= {figs[0]:g}")
+
+
+# --------------------------------------------------------------------------------- sizing
+def test_enormous_case_is_sized_at_once_and_refused(tmp_path):
+    p = case_file(tmp_path, "huge.yaml", "name: huge\nscene: {cell_diameter: 100 mm}\n")
+    t0 = time.perf_counter()
+    val = cli("validate", p)
+    assert val.returncode == 0, val.stderr
+    for w in ("particles", "steps", "memory", "engine time", "too big"):
+        assert w in val.stdout, (w, val.stdout)
+    runs = tmp_path / "runs"
+    dry = cli("run", p, "--dry-run", "--runs", runs)
+    wall = time.perf_counter() - t0
+    one_message(dry, 2, "too big for this machine", "particles", "--force")
+    assert not runs.exists(), "a refused dry run left a directory"
+    assert wall < 120, f"validate + dry run took {wall:.0f} s (it packed for > 300 s before)"
+
+
+def test_dry_run_prints_sizing_without_a_run_directory(tmp_path):
+    out = cli("run", SMOKE, "--dry-run", "--runs", tmp_path / "runs")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.count("particles") == 2 and "memory" in out.stdout and "engine time" in out.stdout
+    assert not (tmp_path / "runs").exists()
+
+
+# --------------------------------------------------------------------------------- paths and files
+def test_analyze_on_a_missing_path(tmp_path):
+    one_message(cli("analyze", tmp_path / "nope"), 2, str(tmp_path / "nope"), "no such run directory")
+
+
+def test_analyze_in_a_read_only_directory(tmp_path):
+    run = synthetic_run(shared_dir(tmp_path) / "run")
+    run.chmod(0o555)
+    out = cli("analyze", run, as_nobody=True, env={"MPLCONFIGDIR": str(tmp_path / "shared")})
+    one_message(out, 2, str(run), "permission denied", "--out")
+
+
+@pytest.mark.engine
+def test_read_only_runs_directory(tmp_path, engines_installed):
+    runs = shared_dir(tmp_path) / "runs"
+    runs.mkdir()
+    runs.chmod(0o555)
+    out = cli("run", IMPACT, "--engine", "liggghts", "--runs", runs, as_nobody=True,
+              env={"MPLCONFIGDIR": str(tmp_path / "shared")})
+    one_message(out, 2, str(runs), "permission denied")
+
+
+def test_truncated_frames_file_is_named_by_load_and_analyze(tmp_path):
+    import orchestrator
+    run = synthetic_run(tmp_path / "run")
+    f = run / "frames.h5"
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    with pytest.raises(orchestrator.frames.FramesError, match=str(f)):
+        orchestrator.load(run).position
+    one_message(cli("analyze", run, "--analysis", "displacements"), 2, str(f), "truncated or damaged")
+
+
+def test_compare_of_different_cases_is_refused_with_what_differs(tmp_path):
+    a = synthetic_run(tmp_path / "a", "shear_cell")
+    b = synthetic_run(tmp_path / "b", "triaxial")
+    out = cli("compare", a, b, "--out", tmp_path / "cmp")
+    one_message(out, 2, "different scenes", "scene.kind", "--different-cases")
+
+
+def test_ct_segment_of_an_all_zero_volume(tmp_path):
+    v = tmp_path / "zero.npy"
+    np.save(v, np.zeros((16, 16, 16), np.uint16))
+    one_message(cli("ct", "segment", v, "--voxel-size", "2 um", "--out", tmp_path / "seg"), 2, str(v),
+                "single grey value", "check that the file holds")
+
+
+def test_a_2d_tiff_is_refused(tmp_path):
+    import tifffile
+    im = tmp_path / "slice.tif"
+    tifffile.imwrite(im, (np.random.default_rng(0).random((32, 32)) * 255).astype(np.uint8))
+    out = cli("ct", "segment", im, "--voxel-size", "2 um", "--out", tmp_path / "seg")
+    assert out.returncode == 2 and "2-D image" in out.stdout + out.stderr and "grains" not in out.stdout
+
+
+def test_outputs_follow_the_umask(tmp_path):
+    """Analysis outputs were 0600 (a mkstemp file renamed): with umask 022 they must be 0644."""
+    from orchestrator.analysis import run_analyses
+    from orchestrator.frames import Frames
+    run = synthetic_run(tmp_path / "run")
+    old = os.umask(0o022)
+    try:
+        run_analyses(Frames(run), ["displacements"], run / "analysis")
+    finally:
+        os.umask(old)
+    files = [f for f in (run / "analysis").rglob("*") if f.is_file()]
+    assert files
+    modes = {f.name: stat.S_IMODE(f.stat().st_mode) for f in files}
+    assert set(modes.values()) == {0o644}, modes
+
+
+# --------------------------------------------------------------------------------- stale state
+def test_running_without_a_live_owner_is_marked_interrupted(tmp_path):
+    from orchestrator.runner import read_summary
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "summary.json").write_text(json.dumps({"status": "running", "pid": 999999}))
+    (run / ".lock").write_text("")
+    # a live owner holds the lock: still running
+    holder = subprocess.Popen([sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'w'); "
+                               "fcntl.flock(f, fcntl.LOCK_EX); print('locked', flush=True); time.sleep(60)",
+                               str(run / ".lock")], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "locked"
+    assert read_summary(run)["status"] == "running"
+    holder.kill()
+    holder.wait()
+    # its owner died: interrupted, on disk too
+    assert read_summary(run)["status"] == "interrupted"
+    assert json.loads((run / "summary.json").read_text())["status"] == "interrupted"
+
+
+def test_forced_restart_files_are_dropped_with_the_resume_points(tmp_path):
+    from orchestrator.runner import drop_resume_points
+    (tmp_path / "restart").mkdir()
+    (tmp_path / "restart" / "state.100.restart").write_bytes(b"x" * 10)
+    (tmp_path / "restart_forced_liggghts_1234.data").write_bytes(b"x" * 7)
+    assert drop_resume_points(tmp_path) == 17
+    assert not list(tmp_path.rglob("*restart*.*"))
+
+
+def test_engine_signal_is_named_with_the_way_to_resume():
+    from engines.base import _exit_words
+    assert _exit_words(-11) == "was killed by signal SIGSEGV (11)"
+    assert _exit_words(139) == "was killed by signal SIGSEGV (11)"
+    assert _exit_words(1) == "failed with exit status 1"
+
+
+def test_debug_flag_shows_the_traceback(tmp_path):
+    p = tmp_path / "bin.yaml"
+    p.write_bytes(b"\xff\xfe\x00")
+    assert "Traceback" not in cli("validate", p).stderr
+    assert "Traceback" in cli("--debug", "validate", p).stderr
+
+
+# --------------------------------------------------------------------------------- damaged runs
+@pytest.mark.engine
+def test_truncated_frames_file_of_a_complete_run_is_redone(tmp_path, engines_installed):
+    runs = tmp_path / "runs"
+    first = cli("run", IMPACT, "--engine", "liggghts", "--runs", runs, "--quiet")
+    assert first.returncode == 0, first.stderr
+    (run,) = runs.glob("*/liggghts-*")
+    summary = json.loads((run / "summary.json").read_text())
+    rec = summary["integrity"]["frames.h5"]
+    assert rec["frames"] > 1 and rec["size"] == (run / "frames.h5").stat().st_size and len(rec["sha256"]) == 64
+    ref = np.array(__import__("orchestrator").load(run).position)
+    f = run / "frames.h5"
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    again = cli("run", IMPACT, "--engine", "liggghts", "--runs", runs, "--quiet")
+    assert again.returncode == 0, again.stderr
+    assert "reused" not in again.stdout and "damaged" in again.stderr and str(f) in again.stderr
+    assert np.array_equal(np.array(__import__("orchestrator").load(run).position), ref)
+    third = cli("run", IMPACT, "--engine", "liggghts", "--runs", runs, "--quiet")
+    assert "reused" in third.stdout and "damaged" not in third.stderr
+
+
+@pytest.mark.engine
+def test_same_case_started_three_times_at_once(tmp_path, engines_installed):
+    """Runs of one case started together share its run directory: one drives it, the others wait
+    for its lock and reuse the result (it said 'is being run by another process', exit 1). One
+    engine at a time, so it fits the test machine (benchmarks/load_check.py: 8 runs, 5 cases)."""
+    runs = tmp_path / "runs"
+    cmd = [sys.executable, "-m", "orchestrator", "run", str(IMPACT), "--engine", "liggghts", "--runs", str(runs),
+           "--quiet"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    outs = [p.communicate(timeout=600) + (p.returncode,) for p in procs]
+    assert all(code == 0 for _, _, code in outs), [e[-2000:] for _, e, _ in outs]
+    assert sum("reused" in o for o, _, _ in outs) == 2, [o for o, _, _ in outs]
+    (run,) = runs.glob("*/liggghts-*")
+    assert json.loads((run / "summary.json").read_text())["status"] == "complete"

@@ -1,0 +1,77 @@
+"""The cross-validation ladder (orchestrator.compare.ladder): rungs from the case, significance
+against the seed-to-seed scatter, floors, and the single-contact explanation."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from orchestrator.case import load_case
+from orchestrator.compare.ladder import compare_rungs, rungs_for, single_contact_differences
+
+CASES = Path(__file__).resolve().parents[1] / "cases"
+
+
+def test_full_shear_cell_has_five_rungs_each_dropping_one_term():
+    rungs = rungs_for(CASES / "shear_cell_small.yaml")
+    assert [r.name for r, _ in rungs] == ["L0", "L1", "L2", "L3", "L4"]
+    ov = dict((r.name, o) for r, o in rungs)
+    assert ov["L4"] == {}
+    assert ov["L3"]["contact"] == {"torsion": None}
+    assert ov["L0"]["contact"]["damping"] == "restitution"
+    # L0's restitution is the one the seed's gamma_n delivers in the full case: same e in L0 and L1
+    case0 = load_case(CASES / "shear_cell_small.yaml", overrides=ov["L0"])
+    assert case0.contact.adhesion is None and case0.contact.rolling is None and case0.contact.torsion is None
+    assert 0.05 < case0.contact.restitution < 1
+
+
+def test_terms_the_case_does_not_ask_for_are_not_rungs():
+    names = [r.name for r, _ in rungs_for(CASES / "triaxial_smoke.yaml")]
+    assert names == ["L0"]          # restitution damping, no adhesion, rolling or torsion
+
+
+def _runs(rung, eng, values, obs="mu_macro"):
+    return [{"rung": rung, "engine": eng, "seed": k, "status": "complete", "run_dir": None, obs: v}
+            for k, v in enumerate(values)]
+
+
+def test_a_difference_inside_the_scatter_is_not_significant():
+    runs = pd.DataFrame(_runs("L0", "liggghts", [0.50, 0.60, 0.55]) + _runs("L0", "yade", [0.52, 0.62, 0.58])
+                        + _runs("L2", "liggghts", [0.50, 0.51, 0.505]) + _runs("L2", "yade", [0.70, 0.71, 0.705]))
+    res = compare_rungs(runs, ["L0", "L2"])
+    row0 = res.comparison[res.comparison.rung == "L0"].iloc[0]
+    assert not row0["significant"] and row0["ok"]
+    row2 = res.comparison[res.comparison.rung == "L2"].iloc[0]
+    assert row2["significant"] and row2["relative difference"] == pytest.approx(0.2 / 0.605, rel=1e-6)
+    assert res.parts_at == "L2"
+
+
+def test_single_contact_explanation_matches_the_derivation():
+    sc = single_contact_differences(CASES / "shear_cell_seed.yaml").set_index(["term", "engine"])
+    lig = sc.loc[("adhesion", "liggghts")]
+    assert lig["ξ/ξ_σ = 1"] == pytest.approx(1.0, rel=1e-3)              # sjkr matched at ξ_σ
+    assert lig["ξ/ξ_σ = 10"] == pytest.approx(10, rel=2e-2)               # ∝ contact area
+    assert sc.loc[("adhesion", "yade"), "ξ/ξ_σ = 10"] == pytest.approx(1.0, rel=1e-12)   # DMT exact
+    assert sc.loc[("rolling limit", "liggghts"), "ξ/ξ_σ = 0.1"] == pytest.approx(math.sqrt(10), rel=1e-9)
+    assert np.isinf(sc.loc[("torsion limit", "yade"), "ξ/ξ_σ = 1"])
+
+
+@pytest.mark.engine
+def test_smoke_ladder_l0_on_both_engines(tmp_path):
+    """CI rung: the shear cell smoke case at L0 (Hertz-Mindlin + Coulomb, restitution damping) on
+    both engines from the same packing. The smoke case is not physics (4 degrees of shear, ~300
+    grains: mu_macro is noise), but the packing's compression is: the final piston height and the
+    band position must agree within the L0 floor (5 %)."""
+    from orchestrator.compare.ladder import run_ladder
+    res = run_ladder(CASES / "shear_cell_smoke.yaml", seeds=[1], runs_root=tmp_path, workers=1, rungs=["L0"])
+    assert set(res.runs["status"]) == {"complete"}, res.runs[["engine", "status", "error"]]
+    comp = res.comparison.set_index("observable")
+    for obs in ("mu_macro", "piston_z", "shearband_z", "shearband_width", "density_profile"):
+        assert obs in comp.index
+    assert comp.loc["piston_z", "relative difference"] <= 0.05
+    assert comp.loc["shearband_z", "relative difference"] <= 0.05
+    for f in ("comparison", "runs", "stats", "plot"):
+        assert Path(res.files[f]).exists()

@@ -1,0 +1,61 @@
+"""Key results of a run (orchestrator.results): precision rules and the figures read from a run
+directory's own files."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from orchestrator.results import format_measure, key_results, results_frame
+
+
+def test_format_measure_keeps_two_significant_digits_of_the_error():
+    assert format_measure(0.57123, 0.1312) == "0.57 ± 0.13"
+    assert format_measure(123.456, 7.89, "µm") == "123.5 ± 7.9 µm"
+    assert format_measure(0.001234, None) == "0.001234"
+    assert format_measure(float("nan"), 1.0) == "n/a"
+    assert format_measure(2.5, 0.0, "°") == "2.5 °"
+
+
+def _fake_shear_cell_run(tmp_path):
+    run = tmp_path / "run"
+    adir = run / "analysis"
+    adir.mkdir(parents=True)
+    (run / "case.yaml").write_text(yaml.safe_dump({"name": "x", "scene": {"kind": "shear_cell"}}))
+    (run / "params.json").write_text(json.dumps({"scene": {"x50": 30e-6}}))
+    (run / "summary.json").write_text(json.dumps({
+        "status": "complete", "wall_time": {"engine": 200.0}, "estimated_engine_time_s": 180.0,
+        "substitutions": [{"feature": "adhesion", "mechanism": "sjkr", "note": ""}]}))
+    (run / "shear_cell_checks.json").write_text(json.dumps({"lower_piston_force": {"relative_error": 0.011}}))
+    asum = {"friction": {"name": "friction", "status": "ok", "scalars": {"mu_mean": 0.41, "mu_std": 0.05, "n": 30}},
+            "shearband": {"name": "shearband", "status": "ok", "scalars": {}}}
+    (adir / "analysis_summary.json").write_text(json.dumps(asum))
+    pd.DataFrame({"r_tilde": [0.5, 0.7], "z_sb": [100e-6, 120e-6], "z_sb_err": [3e-6, 4e-6],
+                  "w_sb": [200e-6, 260e-6], "w_sb_err": [10e-6, 20e-6], "n_fits": [5, 5]}
+                 ).to_csv(adir / "shearband_steady.csv", index=False)
+    return run
+
+
+def test_shear_cell_key_results_from_the_run_files(tmp_path):
+    rows = {r.quantity: r for r in key_results(_fake_shear_cell_run(tmp_path))}
+    assert rows["μ_macro (steady)"].value == 0.41 and rows["μ_macro (steady)"].error == 0.05
+    z = rows["band position z_sb above the lower vane tips"]
+    assert np.isclose(z.value, 110.0) and z.unit == "µm"
+    # fit errors combined (2.5 µm) and radius spread std/sqrt(2) = 10 µm, in quadrature
+    assert np.isclose(z.error, np.hypot(np.hypot(3, 4) / 2, np.std([100, 120], ddof=1) / np.sqrt(2)))
+    assert np.isclose(rows["band width w_sb / x50"].value, 230e-6 / 30e-6)
+    assert rows["band width w_sb"].seed.startswith("≈ 8 x50 = 240")
+    assert rows["band fitted"].ok is True
+    assert rows["compression: lower piston force vs target"].ok is True
+    assert rows["substitutions"].value == "adhesion → sjkr"
+    df = results_frame(tmp_path / "run")
+    assert list(df.columns[:2]) == ["quantity", "text"]
+
+
+def test_no_band_is_said_not_hidden(tmp_path):
+    run = _fake_shear_cell_run(tmp_path)
+    (run / "analysis" / "shearband_steady.csv").write_text("r_tilde,z_sb,z_sb_err,w_sb,w_sb_err,n_fits\n")
+    rows = {r.quantity: r for r in key_results(run)}
+    assert rows["band fitted"].ok is False
