@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from engines.lammps.adapter import Lammps, find_lmp
-from engines.lammps.dump import dump_columns_in, read_binary_dump, scan, truncate_binary_dump
+from engines.lammps_dump import dump_columns_in, read_binary_dump, scan_binary_dump, truncate_binary_dump
 from engines.lammps.numbers import (lammps_numbers, restitution_damping, seed_gamma_n,
                                     tangential_damping_factor, viscoelastic_eta, wall_young)
 from engines.lammps_dump import read_dump
@@ -57,7 +57,7 @@ def test_reader_reads_both_headers_in_step_order_and_stops_at_a_cut(tmp_path, mo
     np.testing.assert_array_equal(snaps[0][1], a)
     np.testing.assert_array_equal(snaps[1][1], b)
     assert dump_columns_in(f) == (["id", "x", "y", "z"] if modern else None)
-    assert truncate_binary_dump(f, 10) == len(_snapshot(10, a, modern, chunks=2, time=1e-3))
+    assert truncate_binary_dump(f, 4, 10) == len(_snapshot(10, a, modern, chunks=2, time=1e-3))
     assert [s for s, _ in read_binary_dump(f, 4)] == [10]
 
 
@@ -72,11 +72,11 @@ def test_reader_takes_a_step_written_twice_from_the_later_segment(tmp_path):
 def test_reader_refuses_a_wrong_width_and_an_unknown_magic(tmp_path):
     from engines.base import EngineError
     raw = _snapshot(0, np.zeros((2, 4)))
-    with pytest.raises(EngineError, match="5 values per atom|4 values per atom"):
-        list(scan(raw, 5))
+    with pytest.raises(EngineError, match="4 values per atom, expected 5"):
+        list(scan_binary_dump(raw, 5))
     bad = raw.replace(b"DUMPCUSTOM", b"DUMPXXXXXX")
     with pytest.raises(EngineError, match="magic"):
-        list(scan(bad))
+        list(scan_binary_dump(bad, 4))
 
 
 # ------------------------------------------------------------------------------------------

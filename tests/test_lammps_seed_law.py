@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from engines.lammps.adapter import find_lmp
-from engines.lammps.dump import dump_columns_in, read_binary_dump
+from engines.lammps_dump import dump_columns_in, read_binary_dump
 from engines.lammps.numbers import seed_law_numbers
 from orchestrator.seed_law import head_on, seed_pair
 

@@ -6,7 +6,7 @@ the same ``id type diameter density x y z`` lines as LIGGGHTS' granular style). 
 ``lmp -in deck.in`` (the ``lmp`` beside the running Python, i.e. the virtual environment's bin/,
 else on PATH; under the mpich wheel's ``mpiexec -np N`` for N > 1 ranks), progress from thermo
 lines. Parse: one binary ``dump custom`` per run segment (modern ``DUMPCUSTOM`` header,
-:mod:`engines.lammps.dump`) into frames.h5. Resume: ``restart/state.<step>.restart`` files,
+:mod:`engines.lammps_dump`, shared with LIGGGHTS) into frames.h5. Resume: ``restart/state.<step>.restart`` files,
 ``read_restart`` and ``run N upto``.
 """
 from __future__ import annotations
@@ -27,12 +27,11 @@ from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
 from ..base import Engine, EngineError, UnsupportedFeature, tail
-from ..lammps_dump import COLUMNS
+from ..lammps_dump import COLUMNS, read_binary_dump, truncate_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
 from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
 from ..liggghts.segments import dump_segments
 from ..render import render_template
-from .dump import read_binary_dump, truncate_binary_dump
 from .numbers import lammps_numbers
 
 #: frames.h5 fields the LAMMPS decks dump (no stress yet: refused in render)
@@ -180,8 +179,10 @@ class Lammps(Engine):
     def prepare_resume(self, run_dir: Path, resume: dict):
         """Cut every frame segment back to the restart step: the resumed run writes a new
         segment from there."""
+        cols = Path(run_dir) / "dump" / "columns.json"
+        n = len(json.loads(cols.read_text())) if cols.exists() else None
         for seg in dump_segments(run_dir):
-            if truncate_binary_dump(seg, resume["step"]) == 0:
+            if truncate_binary_dump(seg, n, resume["step"]) == 0:
                 seg.unlink()
 
     # -- parse ------------------------------------------------------------------------------
