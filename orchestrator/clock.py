@@ -135,7 +135,7 @@ def _sample(run_dir: Path) -> RunSample | None:
         except (OSError, ValueError, AttributeError):
             kind = ""
     opts = s.get("engine_options") or {}
-    ranks = int(opts.get("mpi_ranks") if s.get("engine") == "liggghts" else opts.get("threads") or 1) if opts else 1
+    ranks = int(opts.get("mpi_ranks") if s.get("engine") in ("liggghts", "lammps") else opts.get("threads") or 1) if opts else 1
     loop = wt.get("engine_loop") if isinstance(wt.get("engine_loop"), (int, float)) else wt["engine"]
     return RunSample(s["engine"], kind, n, steps, max(ranks, 1), float(wt["engine"]), float(loop), str(run_dir))
 
