@@ -1,9 +1,9 @@
-"""Readers of the LAMMPS dump family (LIGGGHTS-PUBLIC 3.8 today, LAMMPS later): ``dump custom``
+"""Readers of the LAMMPS dump family (LIGGGHTS-PUBLIC 3.8 and LAMMPS 2025): ``dump custom``
 text snapshots and binary ``dump custom`` files, per-atom column names, and ``compute stress/atom``.
 
 Shared by every engine package whose engine writes LAMMPS dumps; nothing here knows a scene.
 Layout of a binary snapshot (LAMMPS ``dump custom`` with a ``.bin`` file name, src/dump_custom.cpp
-``header_binary`` / ``write_binary``): int64 step, int64 natoms, int32 triclinic, 6 int32
+``header_binary`` / ``write_binary``; modern LAMMPS adds a magic header, :func:`_header`): int64 step, int64 natoms, int32 triclinic, 6 int32
 boundary flags, 6 float64 box bounds (+3 tilt factors if triclinic), int32 values per atom,
 int32 chunk count, then per chunk an int32 length and that many float64.
 """
@@ -33,23 +33,79 @@ def stress_tensors(a: np.ndarray, cols: list[str]) -> np.ndarray:
 
 
 
-def scan_binary_dump(raw: bytes, ncols: int):
+#: the magic strings modern LAMMPS (since 2021) writes before each binary snapshot
+MAGIC = (b"DUMPCUSTOM", b"DUMPATOM")
+
+
+def _header(raw: bytes, pos: int, end: int):
+    """One snapshot header at ``pos``: (step, natoms, values per atom, column names or None,
+    offset of the chunk count), or None when it runs past ``end`` (a file cut by a kill).
+
+    Modern LAMMPS (``tools/binary2txt.cpp``) puts before the legacy header an int64
+    ``-len(magic)``, the magic string, an int32 endian flag (1) and an int32 format revision,
+    and, for revision > 1, after the values per atom: int32 length + unit style, a byte "time
+    follows" (+ float64 time), int32 length + the column names. LIGGGHTS 3.8 writes the legacy
+    header only (its first int64, the step, is never negative)."""
+    if pos + 8 > end:
+        return None
+    first = int(np.frombuffer(raw, np.int64, 1, pos)[0])
+    revision, columns, q = 0, None, pos
+    if first < 0:
+        n = -first
+        if q + 8 + n + 8 > end:
+            return None
+        magic = raw[q + 8:q + 8 + n]
+        if magic not in MAGIC:
+            raise DumpError(f"binary dump: unknown magic string {magic!r} at byte {pos}")
+        endian, revision = (int(x) for x in np.frombuffer(raw, np.int32, 2, q + 8 + n))
+        if endian != 1:
+            raise DumpError(f"binary dump: written with another byte order (endian flag {endian:#x})")
+        q += 8 + n + 8
+    if q + 16 + 4 + 24 + 48 + 4 > end:
+        return None
+    step, natoms = (int(x) for x in np.frombuffer(raw, np.int64, 2, q))
+    tri = int(np.frombuffer(raw, np.int32, 1, q + 16)[0])
+    if tri not in (0, 1):
+        raise DumpError(f"binary dump: general triclinic boxes (flag {tri}) are not read")
+    q += 16 + 4 + 24 + 48 + (24 if tri else 0)
+    if q + 4 > end:
+        return None
+    size_one = int(np.frombuffer(raw, np.int32, 1, q)[0])
+    q += 4
+    if revision > 1:
+        if q + 4 > end:
+            return None
+        q += 4 + max(int(np.frombuffer(raw, np.int32, 1, q)[0]), 0)        # unit style
+        if q + 1 > end:
+            return None
+        q += 1 + (8 if raw[q] else 0)                                       # time flag (+ time)
+        if q + 4 > end:
+            return None
+        n = int(np.frombuffer(raw, np.int32, 1, q)[0])
+        if q + 4 + n > end:
+            return None
+        columns = raw[q + 4:q + 4 + n].decode().split()
+        q += 4 + n
+    if q + 4 > end:
+        return None
+    return step, natoms, size_one, columns, q
+
+
+def scan_binary_dump(raw: bytes, ncols: int | None):
     """Yield (step, natoms, start, end, chunks) for each *complete* snapshot of a LIGGGHTS/LAMMPS
-    binary ``dump custom`` in file order, stopping at a snapshot cut short by a kill. Layout per
-    snapshot: int64 step, int64 natoms, int32 triclinic, 6 int32 boundary flags, 6 float64 box
-    bounds (+3 tilt factors if triclinic), int32 values per atom, int32 chunk count, then per
-    chunk an int32 length and that many float64."""
+    binary ``dump custom`` in file order (either header, :func:`_header`), stopping at a snapshot
+    cut short by a kill; ``chunks`` are (byte offset, number of float64). ``ncols``: the values
+    per atom expected (checked; None: any)."""
     pos, end = 0, len(raw)
-    while pos + 100 <= end:
-        step, natoms = (int(x) for x in np.frombuffer(raw, np.int64, 2, pos))
-        tri = int(np.frombuffer(raw, np.int32, 1, pos + 16)[0])
-        q = pos + 16 + 4 + 24 + 48 + (24 if tri else 0)
-        if q + 8 > end:
+    while True:
+        h = _header(raw, pos, end)
+        if h is None:
             return
-        size_one, nchunk = (int(x) for x in np.frombuffer(raw, np.int32, 2, q))
-        q += 8
-        if size_one != ncols:
+        step, natoms, size_one, _, q = h
+        if ncols is not None and size_one != ncols:
             raise DumpError(f"binary dump: snapshot at byte {pos} has {size_one} values per atom, expected {ncols}")
+        nchunk = int(np.frombuffer(raw, np.int32, 1, q)[0])
+        q += 4
         chunks = []
         for _ in range(nchunk):
             if q + 4 > end:
@@ -63,6 +119,12 @@ def scan_binary_dump(raw: bytes, ncols: int):
         yield step, natoms, pos, q, chunks
         pos = q
 
+
+def dump_columns_in(path) -> list[str] | None:
+    """The column names a modern binary dump declares in its first snapshot (None: legacy)."""
+    raw = Path(path).read_bytes()
+    h = _header(raw, 0, len(raw))
+    return h[3] if h else None
 
 
 def read_binary_dump(paths, ncols: int):

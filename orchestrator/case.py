@@ -17,6 +17,7 @@ from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
 from .derive import DerivationError, derive
 from .registry import engine_names, get_scene, scene_kinds
+from .resources import templates_dir
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
 
 
@@ -259,6 +260,16 @@ class Case(Strict):
             if name not in known:
                 raise ValueError(f"unknown engine {name!r}; installed engines: {', '.join(known)}")
         return v
+
+    @model_validator(mode="after")
+    def _default_engines_have_decks(self):
+        """A case that names no engines runs on every installed engine that has a deck for its
+        scene (LAMMPS has no shear-cell or triaxial deck yet); named engines are kept as given."""
+        if "engines" not in self.model_fields_set:
+            kind = getattr(self.scene, "kind", None)
+            if kind is not None:
+                self.engines = [e for e in self.engines if any((templates_dir() / e).glob(f"{kind}.*.j2"))]
+        return self
 
     @field_validator("analysis")
     @classmethod

@@ -130,9 +130,9 @@ def cmd_engines(args) -> int:
     t = Table(title="DEM engines")
     t.add_column("feature")
     engs = [get_engine(n) for n in engine_names()]
-    for e in engs:
-        ver = e.version() if e.available() else "not installed"
-        t.add_column(f"{e.name} ({ver})")
+    for e in engs:          # versions on their own lines: with three engines a table cell wraps them
+        con.print(f"{e.name}: {e.version() if e.available() else 'not installed'}")
+        t.add_column(e.name)
     for f in FEATURES:
         row = [f]
         for e in engs:

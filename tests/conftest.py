@@ -1,5 +1,5 @@
-"""Shared fixtures. Engine tests run the real `liggghts` and `yade` binaries: a missing engine is
-a failure, not a skip (the README's set-up command installs both)."""
+"""Shared fixtures. Engine tests run the real `liggghts`, `yade` and `lmp` binaries: a missing engine
+is a failure, not a skip (the README's set-up command installs all three)."""
 from __future__ import annotations
 
 import shutil
@@ -19,7 +19,8 @@ def runs_root(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def engines_installed():
-    missing = [e for e in ("liggghts", "yade") if shutil.which(e) is None]
+    from engines import engine_names, get_engine
+    missing = [e for e in engine_names() if not get_engine(e).available()]
     if missing:
         pytest.fail(f"engine(s) not installed: {missing}; run `bash .ci/setup` (README)")
     return True

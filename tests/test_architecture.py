@@ -24,7 +24,7 @@ CASES = ROOT / "cases"
 
 
 def test_registries_list_the_installed_engines_and_scenes():
-    assert engine_names() == ("liggghts", "yade")
+    assert engine_names() == ("lammps", "liggghts", "yade")
     assert scene_kinds() == ("impact", "plane_shear", "shear_cell", "triaxial")
     for name in engine_names():
         assert get_engine(name).name == name
@@ -35,8 +35,8 @@ def test_registries_list_the_installed_engines_and_scenes():
 
 
 def test_unknown_engine_is_refused_naming_the_installed_ones():
-    with pytest.raises(CaseError, match=r"engines: unknown engine 'lammps'; installed engines: liggghts, yade"):
-        load_case(CASES / "triaxial_smoke.yaml", overrides={"engines": ["lammps"]})
+    with pytest.raises(CaseError, match=r"engines: unknown engine 'pfc'; installed engines: lammps, liggghts, yade"):
+        load_case(CASES / "triaxial_smoke.yaml", overrides={"engines": ["pfc"]})
 
 
 @pytest.mark.parametrize("case, term, override", [

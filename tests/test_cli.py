@@ -43,7 +43,8 @@ def test_missing_case_file_is_a_clear_error(tmp_path):
 def test_engines_lists_versions_and_capabilities(engines_installed):
     out = cli("engines")
     assert out.returncode == 0
-    assert "LIGGGHTS-PUBLIC 3.8" in out.stdout and "YADE 2023.02" in out.stdout
+    assert "LIGGGHTS-PUBLIC 3.8" in out.stdout and "YADE 2023.02" in out.stdout  \
+        and "lammps: LAMMPS 22 Jul 2025" in out.stdout
     assert "membrane" in out.stdout and "substitute" in out.stdout
 
 
@@ -52,7 +53,7 @@ def test_dry_run_sizes_without_work(tmp_path):
     no packing, no run directory (issue #16; decks are rendered by run_case(dry_run=True))."""
     out = cli("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path / "runs")
     assert out.returncode == 0, out.stderr
-    assert out.stdout.count("17 particles") == 2 and out.stdout.count("engine time") == 2
+    assert out.stdout.count("17 particles") == 3 and out.stdout.count("engine time") == 3
     assert not (tmp_path / "runs").exists()
 
 
@@ -62,11 +63,11 @@ def test_verify_prints_a_table_per_engine(runs_root, engines_installed, tmp_path
     out = cli("verify", "--runs", runs_root, "--csv", tmp_path / "verify.csv", "--case", "_1_sphere_sphere_glass",
               "--case", "oblique", timeout=1800)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
-    assert "— liggghts" in out.stdout and "— yade" in out.stdout
+    assert "— liggghts" in out.stdout and "— yade" in out.stdout and "— lammps" in out.stdout
     assert "checks within tolerance" in out.stdout
     import pandas as pd
     t = pd.read_csv(tmp_path / "verify.csv")
-    assert set(t.engine) == {"liggghts", "yade"} and t["pass"].all()
+    assert set(t.engine) == {"liggghts", "yade", "lammps"} and t["pass"].all()
     assert {"contact_time", "peak_force", "e_n", "e_t", "max_overlap"} <= set(t.quantity)
     assert set(t.case) == {"chung_ooi_1_sphere_sphere_glass", "chung_ooi_4_oblique"}
     assert cli("verify", "--case", "no_such_case").returncode == 2

@@ -27,6 +27,19 @@ def test_liggghts_error_names_message_and_deck_line(tmp_path, engines_installed)
     assert "last lines of" in msg
 
 
+def test_lammps_error_names_message_and_deck_line(tmp_path, engines_installed):
+    deck = tmp_path / "deck.in"
+    deck.write_text("units si\natom_style sphere\nregion r block 0 1 0 1 0 1\ncreate_box 1 r\n"
+                    "fix broken all nonexistent/style 1 2 3\n")
+    with pytest.raises(EngineError) as exc:
+        get_engine("lammps").run(deck, load_case(CASE), 10, tmp_path / "engine.log", timeout=60, progress=False)
+    msg = str(exc.value)
+    assert "exit status 1" in msg
+    assert "LAMMPS says: ERROR" in msg and "nonexistent/style" in msg
+    assert "on deck.in line 5: fix broken all nonexistent/style 1 2 3" in msg          # the deck line
+    assert "last lines of" in msg
+
+
 def test_yade_error_names_script_line(tmp_path, engines_installed):
     script = tmp_path / "script.py"
     script.write_text("from yade import *\nO.dt = 1e-6\nraise ValueError('bad parameter in the scene')\n")

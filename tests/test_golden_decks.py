@@ -35,6 +35,9 @@ CASES = [
     ("verification/chung_ooi_1_sphere_sphere_glass.yaml", "yade"),
     ("verification/chung_ooi_4_oblique.yaml", "liggghts"),
     ("verification/chung_ooi_4_oblique.yaml", "yade"),
+    ("verification/chung_ooi_1_sphere_sphere_glass.yaml", "lammps"),
+    ("verification/chung_ooi_4_oblique.yaml", "lammps"),
+    ("plane_shear_smoke.yaml", "lammps"),
 ]
 
 #: files written by render/prepare whose content is data, summarised by a hash

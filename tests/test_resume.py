@@ -18,7 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 #: long enough to be killed after a restart on either engine (YADE is ~5x slower per step)
-AFTER_CONTACT = {"liggghts": 4000.0, "yade": 800.0}
+AFTER_CONTACT = {"liggghts": 4000.0, "yade": 800.0, "lammps": 4000.0}
 
 
 def long_case(tmp_path: Path, engine: str) -> Path:
@@ -33,19 +33,20 @@ def orchestrator(*args, **kw):
     return [sys.executable, "-m", "orchestrator", *args]
 
 
-@pytest.mark.parametrize("engine", ["liggghts", "yade"])
+@pytest.mark.parametrize("engine", ["liggghts", "yade", "lammps"])
 def test_killed_run_resumes(engine, tmp_path, engines_installed):
     case = long_case(tmp_path, engine)
     runs = tmp_path / "runs"
     proc = subprocess.Popen(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    marker = "restart/state.*.restart" if engine == "liggghts" else "checkpoint.yade.gz"
+    restarts = engine in ("liggghts", "lammps")
+    marker = "restart/state.*.restart" if restarts else "checkpoint.yade.gz"
     t0 = time.time()
     run_dir = None
     while time.time() - t0 < 120:
         found = list(runs.glob(f"long_impact/{engine}-*/{marker}"))
-        if len(found) >= (2 if engine == "liggghts" else 1):
-            run_dir = found[0].parents[1] if engine == "liggghts" else found[0].parent
+        if len(found) >= (2 if restarts else 1):
+            run_dir = found[0].parents[1] if restarts else found[0].parent
             break
         assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
         time.sleep(0.2)

@@ -1,4 +1,4 @@
-"""Contact-level verification (issue #2, Chung & Ooi 2011 tests 1-4) on both real engines, with
+"""Contact-level verification (issue #2, Chung & Ooi 2011 tests 1-4) on the three real engines, with
 the time step the derived-parameter module chooses: contact time and peak force within 1 % of
 Hertz, normal restitution within 1 % of the requested value, tangential restitution within 2 % of
 the rigid sliding limit beyond the threshold angle."""
@@ -17,7 +17,7 @@ CASES = verification_cases()
 pytestmark = pytest.mark.engine
 
 
-@pytest.mark.parametrize("engine", ["liggghts", "yade"])
+@pytest.mark.parametrize("engine", ["liggghts", "yade", "lammps"])
 @pytest.mark.parametrize("path", CASES, ids=[p.stem for p in CASES])
 def test_impact_matches_analytic(path, engine, runs_root, engines_installed):
     case = load_case(path)

@@ -1,4 +1,4 @@
-"""Plane shear with the seed 000 rolling and twisting resistance (as the shear cell): both engines
+"""Plane shear with the seed 000 rolling and twisting resistance (as the shear cell): the engines
 run it with their named substitutes, the springs are the seed's k_r = k_tw = k_t r_eff², and the
 rolling resistance raises the macroscopic friction of the sheared packing."""
 from __future__ import annotations
@@ -19,7 +19,9 @@ ROLL = {"contact": {"rolling": {"model": "seed000"}, "torsion": {"coefficient": 
                     "substitutes": {"liggghts.rolling_friction_load": "epsd2_constant",
                                     "liggghts.torsion_friction": "epsd2_torsion_torque",
                                     "yade.rolling_friction_load": "mindlin_moment",
-                                    "yade.torsion_friction": "mindlin_ktwist_elastic"}}}
+                                    "yade.torsion_friction": "mindlin_ktwist_elastic",
+                                    "lammps.rolling_friction_load": "sds_constant",
+                                    "lammps.torsion_friction": "sds_median_pair"}}}
 
 
 def test_rolling_springs_are_the_seeds():
@@ -47,7 +49,7 @@ def test_liggghts_torsion_needs_rolling():
 
 
 @pytest.mark.engine
-@pytest.mark.parametrize("engine", ["liggghts", "yade"])
+@pytest.mark.parametrize("engine", ["liggghts", "yade", "lammps"])
 def test_plane_shear_with_rolling_runs(engine, runs_root, engines_installed):
     case = load_case(CASE, overrides=ROLL)
     out = run_case(case, engine, runs_root=runs_root, progress=False)
@@ -56,9 +58,10 @@ def test_plane_shear_with_rolling_runs(engine, runs_root, engines_installed):
     mech = {x["feature"]: x["mechanism"] for x in s["substitutions"]}
     assert mech["rolling_friction_load"] == ROLL["contact"]["substitutes"][f"{engine}.rolling_friction_load"]
     assert mech["torsion_friction"] == ROLL["contact"]["substitutes"][f"{engine}.torsion_friction"]
-    deck = (out.run_dir / ("deck.in" if engine == "liggghts" else "script.py")).read_text()
-    assert ("rolling_friction epsd2" in deck and "torsionTorque on" in deck) if engine == "liggghts" else \
-        ("law2.includeMoment = True" in deck and "ip2.ktwist" in deck)
+    deck = (out.run_dir / ("script.py" if engine == "yade" else "deck.in")).read_text()
+    assert {"liggghts": "rolling_friction epsd2" in deck and "torsionTorque on" in deck,
+            "yade": "law2.includeMoment = True" in deck and "ip2.ktwist" in deck,
+            "lammps": "rolling sds" in deck and "twisting sds" in deck}[engine]
     rolled = observables(case, out.run_dir)["mu_macro"]
     plain = run_case(load_case(CASE), engine, runs_root=runs_root, progress=False)
     free = observables(load_case(CASE), plain.run_dir)["mu_macro"]

@@ -1,0 +1,141 @@
+"""LAMMPS-specific numbers: what ``pair_style granular`` and ``fix wall/gran granular`` must be
+given so that they deliver the case's physics (every other number comes from
+:func:`orchestrator.derive.derive`, shared by all engines).
+
+Sources (LAMMPS 22 Jul 2025, ``src/GRANULAR``):
+
+- ``hertz/material E e ν`` between two particles of one material: F = 4/3 E* √R δ^(3/2) with
+  E* = E/(2(1-ν²)) (``GranSubMod::mix_stiffnessE``); against a ``fix wall/gran`` wall the same
+  E/(2(1-ν²)) of the numbers given to the fix (``mix_stiffnessE_wall``: the wall is taken to be
+  of the particle's material). A wall of another material is therefore given the E' that makes
+  E'/(2(1-ν²)) the case's particle-wall E* (:func:`wall_young`). The 2021 Debian build used
+  E/(2(1-ν)) there, 7.6 % too stiff at ν = 0.2; the 2025 wheel does not (checked by the
+  Chung & Ooi sphere-plane cases, whose contact times agree with Hertz to 1e-4);
+- ``tangential mindlin k_t x_γt μ``: F_t = -min(μ F_n, |k_t a ξ + η_t v_t|) with the contact
+  radius a = √(R δ) and the total tangential displacement ξ, k_t = 8 G* (given explicitly);
+  the same no-slip Mindlin stiffness and total-displacement history as LIGGGHTS' ``tangential
+  history`` (Chung & Ooi 2011's "Mindlin" is the no-slip k_t = 8 G* a);
+- ``damping coeff_restitution`` (``GranSubModDampingCoeffRestitution``): η_n = 2√(5/6)(-β)
+  √(m* S_n), S_n = 2 E* a, β = ln e/√(ln²e + π²): LIGGGHTS' and YADE's Tsuji form; with
+  ``limit_damping`` the total normal force is clipped at zero as LIGGGHTS' ``limitForce on``,
+  so the same inverse (:func:`orchestrator.derive.restitution_input`) delivers the requested e;
+- tangential damping η_t = x_γt η_n: LIGGGHTS uses η_t = 2√(5/6)(-β)√(m* S_t), S_t = 8 G* a,
+  so x_γt = √(S_t/S_n) = √(4 G*/E*) (:func:`tangential_damping_factor`);
+- ``damping viscoelastic``: η_n = η_n0 a m* (Brilliantov et al. 1996): the damping force
+  η_n0 m* √R √δ δ̇ is seed 000 eq. 1's γ_n √ξ ξ̇ when η_n0 = γ_n/(m* √R*) (:func:`viscoelastic_eta`).
+"""
+from __future__ import annotations
+
+import math
+
+
+def wall_young(E_eff_target: float, nu: float) -> float:
+    """Young's modulus [Pa] to give ``fix wall/gran granular hertz/material E' e ν`` so that its
+    E'/(2(1-ν²)) equals ``E_eff_target`` [Pa], the case's particle-wall E*."""
+    return 2.0 * (1.0 - nu * nu) * E_eff_target
+
+
+def tangential_damping_factor(E_eff: float, G_eff: float) -> float:
+    """x_γt = η_t/η_n = √(S_t/S_n) = √(8 G* a/(2 E* a)) = √(4 G*/E*) [-]: LAMMPS' tangential
+    damping equal to LIGGGHTS' (normal_model_hertz.h: γ_t = -2√(5/6) β √(S_t m*))."""
+    return math.sqrt(4.0 * G_eff / E_eff)
+
+
+def restitution_damping(params: dict) -> dict:
+    """``damping coeff_restitution`` input: {``e_input``, ``limit_damping``}. With tensile clipping
+    (``limit_damping``) the e that LIGGGHTS is fed (the clipped law's inverse); below what the
+    clipped law can deliver (``engine_input`` 0) the unclipped law is used and fed the target
+    itself, as YADE is (Antypov & Elliott 2011, eq. 17)."""
+    r = params["restitution"]
+    if r["target"] >= 1.0:
+        return {"e_input": 1.0, "limit_damping": True}
+    if r["engine_input"] > 0:
+        return {"e_input": r["engine_input"], "limit_damping": True}
+    return {"e_input": r["target"], "limit_damping": False}
+
+
+def viscoelastic_eta(gamma_n: float, m_eff: float, R_eff: float) -> float:
+    """η_n0 [1/(m s)] of ``damping viscoelastic`` whose force η_n0 m* √(R* δ) δ̇ equals
+    γ_n √δ δ̇ (seed 000 eq. 1) for a pair of reduced mass ``m_eff`` [kg] and radius ``R_eff`` [m]."""
+    return gamma_n / (m_eff * math.sqrt(R_eff))
+
+
+def seed_gamma_n(E_eff: float, m_eff: float) -> float:
+    """Seed 000's normal damping constant γ_n = √(4/3 E* m*) [kg/(m^½ s)] (section 3.2)."""
+    return math.sqrt(4.0 / 3.0 * E_eff * m_eff)
+
+
+def rolling_twisting(contact: dict, d50: float, rho: float) -> dict:
+    """``rolling sds k_r γ_r μ_r`` and ``twisting sds k_tw γ_tw μ_tw`` for seed 000's rolling and
+    twisting resistance (§3.2), from a scene's contact numbers (``yade_krot`` = ``yade_ktwist`` =
+    k_t r_eff², ``rolling_coefficient`` μ_r with M_max = μ_r r_eff |F_n|, ``torsion_coefficient``
+    μ_tor/r_eff), for the median pair (r_eff = d50/4, m_eff = m50/2).
+
+    LAMMPS (``gran_sub_mod_rolling``): F_r = −k_r ξ_r − γ_r v_r, ξ_r = ∫v_r dt the rolling
+    displacement (R* × relative rotation), limited by μ_r F_ncrit, torque R* × F_r; so the
+    torque per radian is k_r R*² and the limit μ_r R* F_ncrit: k_r = k_t and μ_r exact for every
+    pair. Twisting (``gran_sub_mod_twisting``, Marshall 2009 eqs. 30, 44): M = −k_tw ψ − γ_tw ω,
+    limit μ_tw F_ncrit: k_tw = k_t r_eff² and μ_tw = μ_tor r_eff of the median pair (one number
+    per type pair: a named substitute). Dashpots: the seed's 2√(k m*) (§3.2, "all springs
+    utilized for friction are damped"), with I* = 2/5 m r² / 2 for the twist."""
+    r_eff = d50 / 4.0
+    m50 = rho * 4.0 / 3.0 * math.pi * (d50 / 2.0) ** 3
+    m_eff, I_eff = m50 / 2.0, 0.4 * m50 * (d50 / 2.0) ** 2 / 2.0
+    out = {}
+    if "rolling_coefficient" in contact:
+        kr = contact["yade_krot"] / r_eff ** 2
+        out["rolling"] = {"k": kr, "gamma": 2.0 * math.sqrt(kr * m_eff), "mu": contact["rolling_coefficient"]}
+    if "torsion_coefficient" in contact:
+        ktw = contact["yade_ktwist"]
+        out["twisting"] = {"k": ktw, "gamma": 2.0 * math.sqrt(ktw * I_eff), "mu": contact["torsion_coefficient"] * r_eff}
+    return out
+
+
+def lammps_numbers(params: dict, case=None) -> dict:
+    """The numbers the LAMMPS templates need beyond ``params`` (SI); ``case`` for the scenes with
+    rolling and twisting resistance (their median diameter)."""
+    mat = params["material"]
+    d = restitution_damping(params)
+    extra = {}
+    contact = params.get("scene", {}).get("contact")
+    if isinstance(contact, dict) and case is not None and hasattr(getattr(case.scene, "psd", None), "median"):
+        extra = rolling_twisting(contact, case.scene.psd.median, mat["rho"])
+    return {**extra,
+        "damping": d,
+        "pair": {"E": mat["E"], "nu": mat["nu"], "kt": 8.0 * params["G_eff_pp"],
+                 "xgt": tangential_damping_factor(params["E_eff_pp"], params["G_eff_pp"])},
+        "wall": {"E": wall_young(params["E_eff_pw"], mat["nu"]), "nu": mat["nu"], "kt": 8.0 * params["G_eff_pw"],
+                 "xgt": tangential_damping_factor(params["E_eff_pw"], params["G_eff_pw"])},
+    }
+
+
+def seed_law_numbers(E: float, nu: float, rho: float, d50: float, f_adh: float, mu: float,
+                     tangential_ratio: float = 2.0 / 7.0) -> dict:
+    """``pair_coeff`` numbers for seed 000's law (§3.1-3.2) on ``pair_style granular``, for a
+    material (E [Pa], ν, ρ [kg/m³]), median diameter ``d50`` [m], median pull-off ``f_adh`` [N]
+    and sliding coefficient μ:
+
+    - ``dmt E η_n0 ν γ``: F = 4/3 E* √R* δ^3/2 − 4πγR* with E* = E/(2(1−ν²)) (the seed's E_eff)
+      and γ = F_adh/(4π⟨r_eff⟩), ⟨r_eff⟩ = d50/4: the pull-off F_adh r_eff/⟨r_eff⟩ of every pair,
+      exact across the PSD;
+    - ``damping viscoelastic`` with η_n0 = γ_n/(m* √R*) of the median pair (:func:`viscoelastic_eta`;
+      exact for that pair only: η_n0 m* √R* / γ_n(pair) = √(m* R* / (m*₅₀ R*₅₀)) elsewhere);
+    - ``tangential linear_history k_t x_γt μ``: the seed's constant k_t = 2/7 · 4/3 E* x50/2;
+      its damping 2√(k_t m*) is matched by x_γt = 2√(k_t m*)/(η_n0 m* √(R* δ)) only at one
+      overlap δ (LAMMPS scales tangential damping with the normal one), given here for δ =
+      ``d50`` · 1e-3 (returned as ``xgt``; ``xgt_overlap`` says which δ).
+
+    LAMMPS' sliding limit with ``dmt`` is μ|F_ne + 2·4πγR*| = μ(F_Hertz + F_adh) (Thornton 1991,
+    Marshall 2009 eq. 43; ``GranSubModNormalDMT::set_fncrit``), the seed's μ|F_n + F_adh| =
+    μ|F_Hertz + F_damp|: they differ by μ(F_adh − F_damp), measured in tests/test_lammps_seed_law.py.
+    """
+    E_eff = E / (2.0 * (1.0 - nu * nu))
+    r50 = d50 / 2.0
+    m50 = rho * 4.0 / 3.0 * math.pi * r50 ** 3
+    m_eff, R_eff = m50 / 2.0, r50 / 2.0
+    eta = viscoelastic_eta(seed_gamma_n(E_eff, m_eff), m_eff, R_eff)
+    kt = tangential_ratio * 4.0 / 3.0 * E_eff * r50
+    overlap = d50 * 1e-3
+    xgt = 2.0 * math.sqrt(kt * m_eff) / (eta * m_eff * math.sqrt(R_eff * overlap))
+    return {"E": E, "nu": nu, "eta_n0": eta, "surface_energy": f_adh / (4.0 * math.pi * d50 / 4.0),
+            "kt": kt, "xgt": xgt, "xgt_overlap": overlap, "mu": mu, "E_eff": E_eff}
