@@ -12,6 +12,7 @@ scene's controls and wall series from its ``post`` (the scene sees the frames th
 from __future__ import annotations
 
 import json
+import shutil
 import re
 import subprocess
 import tempfile
@@ -32,6 +33,16 @@ from .segments import dump_segments, wall_rows
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
+
+
+def openmpi_launcher() -> str:
+    """Debian's LIGGGHTS is built against OpenMPI: its launcher by its own name, so that another
+    ``mpirun`` earlier on PATH (the mpich wheel's, in the venv's bin/ for LAMMPS) is never taken."""
+    for name in ("mpirun.openmpi", "orterun"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return "mpirun"
 
 class Liggghts(Engine):
     name = "liggghts"
@@ -150,7 +161,7 @@ class Liggghts(Engine):
         cmd = ["stdbuf", "-oL", "-eL", self.executable, "-in", deck.name, "-log", "none", "-echo", "screen"]
         n = case.engine_options.mpi_ranks
         if n > 1:
-            cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(n)] + cmd
+            cmd = [openmpi_launcher(), "--allow-run-as-root", "--oversubscribe", "-np", str(n)] + cmd
         return cmd
 
     def progress_step(self, line: str):
