@@ -147,13 +147,13 @@ class Segmentation:
             assert len(self._levels[0]) == nz
         return self._levels
 
-    def blur_sigma(self) -> float:
+    def blur_sigma(self, fraction=None) -> float:
         """Standard deviation [voxels] of the total Gaussian blur of the smoothed scan (PSF and filter),
         from the steepest grey-level slope across grain surfaces: a blurred planar edge of unit contrast
         has slope 1/(sqrt(2 pi) sigma) at its middle. The upper quartile of the slope over voxels at
         solid fraction 0.4-0.6 (curvature and noise lower the median). Checked on rendered scans:
         within 10 % of sqrt(psf^2 + sigma_filter^2) for PSF 0.5-1.2 voxel."""
-        f = self.local_fraction()
+        f = self.local_fraction() if fraction is None else fraction
         nz, ny, nx = f.shape
         flat = f.ravel()
         idx = np.flatnonzero((flat > 0.4) & (flat < 0.6))
@@ -177,9 +177,9 @@ class Segmentation:
         ``threshold_fraction``: for ``resolution``). ``refine=False`` returns every candidate with
         these columns and ``touching``.
         """
-        c = contacts_from_labels(self.labels, self.scan, min_voxels, self.grains, fraction=self.local_fraction())
+        f = self.local_fraction()             # one float32 copy of the volume, used three times
+        c = contacts_from_labels(self.labels, self.scan, min_voxels, self.grains, fraction=f)
         if len(c):
-            f = self.local_fraction()
             g = self.grains.set_index("label")
             vs = self.scan.voxel_size
             ci = self.scan.to_voxel(g.loc[c["i"], ["x", "y", "z"]].to_numpy())
@@ -187,7 +187,7 @@ class Segmentation:
             ri = g.loc[c["i"], "radius"].to_numpy() / vs
             rj = g.loc[c["j"], "radius"].to_numpy() / vs
             c["profile_fraction"] = branch_profile_min(f, ci, cj, ri, rj)
-            s = self.blur_sigma()
+            s = self.blur_sigma(f)
             c["touch_fraction"] = gap_fraction(0.0, ri, rj, s)
             c["threshold_fraction"] = gap_fraction(resolution, ri, rj, s)
             c["touching"] = c["profile_fraction"].to_numpy() >= c["threshold_fraction"].to_numpy()

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Regenerate every speed figure quoted in docs/analysis.md and docs/ct.md (one thread each).
+#   bash benchmarks/docs_figures.sh            # both
+#   bash benchmarks/docs_figures.sh analysis   # docs/analysis.md "Speed"
+#   bash benchmarks/docs_figures.sh ct         # docs/ct.md "Speed" and contact table (512^3 scan cached in scan512.npy)
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+py="${PYTHON:-python}"
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 OVITO_THREAD_COUNT=1 NUMBA_NUM_THREADS=1
+what="${1:-all}"
+if [[ "$what" == all || "$what" == analysis ]]; then
+  "$py" "$here/bench_analysis.py" --repeat 5
+fi
+if [[ "$what" == all || "$what" == ct ]]; then
+  "$py" "$here/bench_ct.py" --size 512 --cache "${SCAN_CACHE:-scan512.npy}"
+fi
