@@ -4,16 +4,28 @@ from __future__ import annotations
 import numpy as np
 
 
-def running_mean(x, rows: int) -> np.ndarray:
-    """Centred running mean over ``rows`` samples, every window full length (shifted inwards at
-    the ends; the whole series when it is shorter than ``rows``). Its values are the means of
-    every run of ``rows`` consecutive samples, so its extremes equal those of a 'valid'
-    convolution: the smoothed peaks of the triaxial summary and of the triaxial analysis agree."""
+def running_mean(x: np.ndarray, rows: int, mode: str = "same") -> np.ndarray:
+    """Running mean over windows of ``rows`` consecutive samples — the one running mean of the
+    project (the triaxial curves and the scene's shear-stage summary both use it). Centred
+    (``same``) windows are the means of every run of ``rows`` consecutive samples, so their extremes
+    equal those of ``valid`` windows: the smoothed peaks of the triaxial summary and analysis agree.
+
+    mode : ``"same"``: one value per sample, windows centred (an even window is centred half a row
+        early) and kept inside the series, so the first and last ``rows // 2`` values use the
+        window at the end (same length as ``x``); ``"valid"``: the mean of every full window,
+        ``len(x) - rows + 1`` values (the mean of all of ``x`` when it is shorter than one window).
+    """
     x = np.asarray(x, float)
     rows = max(int(rows), 1)
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    if mode == "valid":
+        if x.size < rows:
+            return np.array([np.mean(x)])
+        return (c[rows:] - c[:-rows]) / rows
+    if mode != "same":
+        raise ValueError(f"running_mean mode must be 'same' or 'valid', got {mode!r}")
     if rows == 1 or x.size == 0:
         return x.copy()
-    c = np.concatenate([[0.0], np.cumsum(x)])
     k = np.arange(x.size)
     lo = np.clip(k - rows // 2, 0, x.size)
     hi = np.clip(lo + rows, 0, x.size)

@@ -15,6 +15,8 @@ Derived figures (standard soil-mechanics definitions):
 from __future__ import annotations
 
 import numpy as np
+
+from ..numerics import running_mean
 import pandas as pd
 
 from ._common import Result
@@ -23,33 +25,6 @@ from ..frames import Frames
 
 __all__ = ["running_mean", "local_slope", "friction_angle", "dilatancy_angle", "triaxial_curves", "analyze_triaxial",
            "plot_triaxial_runs"]
-
-
-def running_mean(x: np.ndarray, rows: int, mode: str = "same") -> np.ndarray:
-    """Running mean over windows of ``rows`` consecutive samples — the one running mean of the
-    project (the triaxial curves and the scene's shear-stage summary both use it).
-
-    mode : ``"same"``: one value per sample, windows centred (an even window is centred half a row
-        early) and kept inside the series, so the first and last ``rows // 2`` values use the
-        window at the end (same length as ``x``); ``"valid"``: the mean of every full window,
-        ``len(x) - rows + 1`` values (the mean of all of ``x`` when it is shorter than one window).
-    """
-    x = np.asarray(x, float)
-    rows = max(int(rows), 1)
-    c = np.concatenate([[0.0], np.cumsum(x)])
-    if mode == "valid":
-        if x.size < rows:
-            return np.array([np.mean(x)])
-        return (c[rows:] - c[:-rows]) / rows
-    if mode != "same":
-        raise ValueError(f"running_mean mode must be 'same' or 'valid', got {mode!r}")
-    if rows == 1 or x.size == 0:
-        return x.copy()
-    k = np.arange(x.size)
-    lo = np.clip(k - rows // 2, 0, x.size)
-    hi = np.clip(lo + rows, 0, x.size)
-    lo = np.clip(hi - rows, 0, x.size)
-    return (c[hi] - c[lo]) / (hi - lo)
 
 
 def friction_angle(stress_ratio) -> np.ndarray:
