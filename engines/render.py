@@ -79,4 +79,9 @@ def templates_hash(engine: str, scene: str) -> str:
     for name in names:
         h.update(name.encode())
         h.update((TEMPLATES / name).read_bytes())
+    # the Python an engine copies beside its deck (engines/<engine>_runtime/) is part of the deck
+    runtime = TEMPLATES.parent / "engines" / f"{engine}_runtime"
+    for f in sorted(runtime.rglob("*.py")):
+        h.update(f.relative_to(runtime).as_posix().encode())
+        h.update(f.read_bytes())
     return h.hexdigest()

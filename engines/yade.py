@@ -8,6 +8,7 @@ written by ``O.save`` (atomic rename) and reloaded with ``O.load``.
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -17,6 +18,8 @@ from .base import Engine, EngineError, tail
 from .render import render_template
 
 _PROGRESS = re.compile(r"^PROGRESS (\d+)")
+#: the decks' Python (controllers, membrane, recorder, monitors), copied beside every script
+RUNTIME = Path(__file__).resolve().parent / "yade_runtime"
 
 
 class Yade(Engine):
@@ -83,6 +86,8 @@ class Yade(Engine):
             "chunk_frames": int(max(1, min(256, 20e6 / (8 * 13 * n)))),
         }
         script = run_dir / ("resume.py" if resume else "script.py")
+        shutil.copytree(RUNTIME, run_dir / "yade_runtime", dirs_exist_ok=True,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         render_template(f"yade/{case.scene.kind}.py.j2", ctx, script)
         return script
 

@@ -32,10 +32,11 @@ def _patch_liggghts(text: str, limit: float) -> str:
 
 
 def _patch_yade(text: str, limit: float) -> str:
-    text = text.replace("def orch_monitor():\n    m = ORCH_MON\n",
-                        f"def orch_monitor():\n    m = ORCH_MON\n    m['overlap_limit'] = {limit!r}\n")
-    return text.replace('    ov = dmax / m["r_min"]\n',
-                        '    ov = dmax / m["r_min"]\n    print("ORCH_OV %d %r %r" % (O.iter + 1, ov, ke), flush=True)\n')
+    """The monitor settings (yade_runtime/monitors.py reads them) get the overlap limit and
+    ``print_figures`` (an ORCH_OV line at every check)."""
+    return re.sub(r"^(ORCH_MON = json\.loads\(.*\)\n)",
+                  lambda m: m.group(1) + f"ORCH_MON['overlap_limit'] = {limit!r}\nORCH_MON['print_figures'] = True\n",
+                  text, count=1, flags=re.M)
 
 
 def history(case_path, engine: str, fractions: list[float], runs_root="/tmp/orch_history",
