@@ -13,12 +13,13 @@ spent in O.run (the machine is shared; wall time is printed too). Target: deck/b
 segment cut to warm + steps) and prints YADE/LIGGGHTS steps/s.
 
 Run: ``.venv/bin/python benchmarks/bench_yade_speed.py [--steps 3000] [--warm 1000] [--liggghts]
-[--repo DIR] [CASE ...]`` (``--repo``: render with another checkout, e.g. an export of an older
+[--repo DIR] [--set JSON] [CASE ...]`` (``--repo``: render with another checkout, e.g. an export of an older
 commit, for before/after figures).
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import subprocess
@@ -46,11 +47,11 @@ os._exit(0)
 """
 
 
-def render(case_file: str, engine: str, run_dir: Path, repo: Path) -> Path:
+def render(case_file: str, engine: str, run_dir: Path, repo: Path, overrides: dict | None = None) -> Path:
     from orchestrator.case import load_case
     from orchestrator.runner import prepare
     from engines import get_engine
-    case = load_case(repo / "cases" / case_file)
+    case = load_case(repo / "cases" / case_file, overrides=overrides or None)
     params, _ = prepare(case, engine, run_dir)
     return get_engine(engine).render(case, params, run_dir, resume=None)
 
@@ -96,17 +97,20 @@ def main(argv=None):
     ap.add_argument("--warm", type=int, default=1000)
     ap.add_argument("--liggghts", action="store_true")
     ap.add_argument("--repo", type=Path, default=REPO, help="checkout to render with (default: this one)")
+    ap.add_argument("--set", default="{}", help='case overrides as JSON, e.g. \'{"scene": {"membrane": '
+                                                '{"contact_damping_lagged": true}}}\'')
     a = ap.parse_args(argv)
     sys.path.insert(0, str(a.repo))
     rows = []
     for case_file in a.cases:
         with tempfile.TemporaryDirectory(prefix="bench_yade_") as tmp:
-            script = render(case_file, "yade", Path(tmp) / "yade", a.repo)
+            script = render(case_file, "yade", Path(tmp) / "yade", a.repo, json.loads(a.set))
             deck = run_yade(script, a.warm, a.steps, bare=False)
             bare = run_yade(script, a.warm, a.steps, bare=True)
             lig = None
             if a.liggghts:
-                lig = run_liggghts(render(case_file, "liggghts", Path(tmp) / "liggghts", a.repo), a.warm, a.steps)
+                lig = run_liggghts(render(case_file, "liggghts", Path(tmp) / "liggghts", a.repo, json.loads(a.set)),
+                                   a.warm, a.steps)
         rows.append((case_file, deck, bare, lig))
         print(f"{case_file}: deck {deck['rate']:.1f} steps/s CPU ({deck['rate_wall']:.1f} wall), bare "
               f"{bare['rate']:.1f} ({bare['rate_wall']:.1f} wall), contacts {deck['contacts']}/{bare['contacts']}",

@@ -191,10 +191,21 @@ class Membrane:
                     I.phys.moment_bending = Vector3.Zero
 
     def positions(self):
-        return np.fromiter((c for st in self.states for c in st.pos), float, 3 * len(self.states)).reshape(-1, 3)
+        """(n_nodes, 3) node positions [m]. Indexing a minieigen Vector3 is ~8x faster than iterating
+        it (iteration ends on an IndexError per vector): 0.33 vs 2.6 ms for 84 nodes."""
+        out = []
+        for st in self.states:
+            x = st.pos
+            out.append((x[0], x[1], x[2]))
+        return np.array(out)
 
     def velocities(self):
-        return np.fromiter((c for st in self.states for c in st.vel), float, 3 * len(self.states)).reshape(-1, 3)
+        """(n_nodes, 3) node velocities [m/s] (as :meth:`positions`)."""
+        out = []
+        for st in self.states:
+            v = st.vel
+            out.append((v[0], v[1], v[2]))
+        return np.array(out)
 
     def apply_pressure(self, p, zb, zt):
         """Permanent nodal forces until the next call: the pressure (:func:`.mesh.pressure_forces`),

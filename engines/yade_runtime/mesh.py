@@ -89,10 +89,9 @@ def pressure_forces(x: np.ndarray, tri: np.ndarray, nt: int, rn: float, p: float
     frac = np.clip((np.minimum(hi, zt) - np.maximum(lo, zb)) / np.maximum(hi - lo, 1e-300), 0.0, 1.0)
     per = mean_perimeter(x, nt)
     p_eff = p * (per - 2 * math.pi * rn) / per
-    f = np.zeros((len(x), 3))
-    for col in range(3):
-        np.add.at(f, tri[:, col], -p_eff * frac[:, None] * av / 3.0)
-    return f
+    w = -p_eff * frac[:, None] * av / 3.0                     # each facet's force on each of its nodes
+    idx = tri.ravel()
+    return np.stack([np.bincount(idx, weights=np.repeat(w[:, d], 3), minlength=len(x)) for d in range(3)], axis=1)
 
 
 def inner_geometry(x: np.ndarray, nt: int, rn: float, zb: float, zt: float) -> dict:
