@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import Engine, EngineError, tail
+from .base import Engine, EngineError, Substitution, UnsupportedFeature, tail
 from .render import render_template
 
 _PROGRESS = re.compile(r"^PROGRESS (\d+)")
@@ -53,11 +53,30 @@ class Yade(Engine):
         "torsion_friction": {
             "mindlin_ktwist_elastic": "Mindlin ktwist: elastic twisting spring with no limit",
         },
+        "membrane": {
+            "shell_pressure": "instead of the PFacet membrane (which YADE has), the LIGGGHTS deck's lateral "
+                              "boundary: radial forces p·(cell envelope area)·r_i²/Σr_j² on the outer shell of "
+                              "grains of each band x sector cell (yade_runtime/shell.py), for like-for-like "
+                              "comparisons; only when named as yade.membrane",
+        },
         "seed000_damping": {
             "tsuji_restitution": "Tsuji damping (force ∝ δ^1/4 δ̇) with the restitution that seed 000's "
                                  "γ_n = sqrt(4/3 E* m*) delivers, instead of force ∝ δ^1/2 δ̇",
         },
     }
+
+    def check(self, features, accepted):
+        """As :meth:`Engine.check`; a case may also name ``yade.membrane: shell_pressure`` although
+        YADE has a membrane: the substitution is then recorded like any other."""
+        subs = super().check(features, accepted)
+        choice = accepted.get(f"{self.name}.membrane")
+        if "membrane" in features and choice is not None:
+            offered = self.substitutes["membrane"]
+            if choice not in offered:
+                raise UnsupportedFeature(f"contact.substitutes: '{self.name}.membrane: {choice}' is not offered by "
+                                         f"{self.name}; it offers " + "; ".join(f"'{k}': {v}" for k, v in offered.items()))
+            subs.append(Substitution("membrane", choice, offered[choice]))
+        return subs
 
     def _probe_version(self) -> str:
         try:
@@ -84,6 +103,8 @@ class Yade(Engine):
             "yade_fields": fields, "yade_contacts": bool(o.contacts),
             # keep a chunk under ~20 MB of doubles
             "chunk_frames": int(max(1, min(256, 20e6 / (8 * 13 * n)))),
+            # triaxial lateral boundary: the PFacet membrane, or the LIGGGHTS deck's shell pressure
+            "yade_shell": case.contact.substitutes.get("yade.membrane") == "shell_pressure",
         }
         script = run_dir / ("resume.py" if resume else "script.py")
         shutil.copytree(RUNTIME, run_dir / "yade_runtime", dirs_exist_ok=True,

@@ -85,6 +85,19 @@ def test_servo_moves_the_platen_down_under_too_little_stress_and_clips():
     assert control.ramp(50, 100) == 0.5 and control.ramp(500, 100) == 1.0 and control.ramp(3, 0) == 1.0
 
 
+def test_servo_pid_settings_reproduce_the_servo_law():
+    """YADE's ServoPIDController (v = clip(kP (|F| - target), v_max) along +z) with the derived
+    settings is the stage-1 law v = -v_max clip(g (1 - F/(p A)), -1, 1)."""
+    p, area, gain, v_max = 3e5, 1.1e-4, 0.7, 0.02
+    for p_now in (p, 0.3 * p):
+        target, kP = control.servo_pid_settings(p_now, area, gain, v_max, p)
+        for F in np.linspace(0, 3 * p_now * area, 13):
+            v_pid = max(-v_max, min(v_max, kP * (abs(F) - target)))
+            assert v_pid == pytest.approx(control.servo_velocity(1 - F / (p_now * area), gain, v_max), abs=1e-15)
+    target, kP = control.servo_pid_settings(0.0, area, gain, v_max, p)      # ramp start: error 1
+    assert max(-v_max, min(v_max, kP * (0.0 - target))) == pytest.approx(-v_max * gain)
+
+
 def test_membrane_correction_raises_the_pressure_when_the_grains_feel_less_and_stays_bounded():
     corr, avg = control.membrane_correction(1.0, None, 0.9e5, 1e5, 20, 0.5, 0.1)
     assert avg == 0.9e5 and corr == pytest.approx(1 + 0.5 / 20 * (1 / 0.9 - 1))
@@ -140,3 +153,33 @@ def test_stability_history_patch_reaches_the_yade_monitor():
     lines = text.splitlines()
     k = next(i for i, ln in enumerate(lines) if ln.startswith("ORCH_MON = json.loads("))
     assert lines[k + 1:k + 3] == ["ORCH_MON['overlap_limit'] = 4.0", "ORCH_MON['print_figures'] = True"]
+
+
+def test_shell_pressure_puts_p_on_the_envelope_of_each_cell():
+    """A ring of equal grains at radius R0 around an inner core: every ring grain is on its cell's
+    shell, the core is not; the total inward force is p times the envelope area sum_c (2 pi/S) R_c h
+    with R_c = R0 + r, and the volume is pi R_c^2 H (the LIGGGHTS deck's law)."""
+    from engines.yade_runtime import shell
+    r, R0, H, p = 1e-4, 2e-3, 4e-3, 1e5
+    th = np.linspace(0, 2 * np.pi, 64, endpoint=False) + 0.01
+    zs = np.linspace(0.5e-3, 3.5e-3, 8)
+    ring = np.array([(R0 * np.cos(t), R0 * np.sin(t), z) for z in zs for t in th])
+    core = np.array([(0.3 * R0 * np.cos(t), 0.3 * R0 * np.sin(t), z) for z in zs for t in th[::8]])
+    pos = np.vstack([ring, core])
+    rad = np.full(len(pos), r)
+    f, flat, area, volume = shell.shell_forces(pos, rad, 0.0, H, p, bands=4, sectors=8, w=0.5 * r)
+    Rc = R0 + r
+    assert area == pytest.approx(2 * np.pi * Rc * H, rel=1e-12)
+    assert volume == pytest.approx(np.pi * Rc ** 2 * H, rel=1e-12)
+    assert flat == pytest.approx(p * area, rel=1e-12)
+    assert np.all(f[len(ring):] == 0.0) and np.all(f[:, 2] == 0.0)
+    inward = -(f[:len(ring), 0] * ring[:, 0] + f[:len(ring), 1] * ring[:, 1]) / R0
+    assert np.allclose(inward, p * area / len(ring), rtol=1e-9)      # equal grains share equally
+    assert np.allclose(f.sum(axis=0), 0.0, atol=1e-12 * flat)
+
+
+def test_shell_cells_clamp_grains_beyond_the_platens_and_the_seam():
+    from engines.yade_runtime import shell
+    pos = np.array([(1.0, 0.0, -0.1), (1.0, 0.0, 1.2), (-1.0, -1e-18, 0.5), (-1.0, 0.0, 0.5)])
+    c = shell.cells(pos, 0.0, 1.0, bands=2, sectors=4)
+    assert c.tolist() == [0 * 4 + 2, 1 * 4 + 2, 1 * 4 + 0, 1 * 4 + 3]

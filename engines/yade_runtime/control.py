@@ -11,6 +11,15 @@ def servo_velocity(error: float, gain: float, v_max: float) -> float:
     return -v_max * max(-1.0, min(1.0, gain * error))
 
 
+def servo_pid_settings(p_now: float, area: float, gain: float, v_max: float, p: float):
+    """``(target [N], kP [m/s/N])`` for YADE's ServoPIDController on the top platen (axis +z) so that
+    its law ``v = clip(kP (|F| - target), v_max)`` is :func:`servo_velocity` with
+    ``error = 1 - F/(p_now area)``: target = p_now A, kP = v_max gain / (p_now A). ``p_now`` is
+    floored at 1e-9 p (the ramp starts at zero, where the Python law took error = 1)."""
+    pa = max(p_now, 1e-9 * p) * area
+    return pa, v_max * gain / pa
+
+
 def ramp(it: int, ramp_steps: int) -> float:
     """Fraction of the confining pressure applied at iteration ``it`` (linear ramp)."""
     return min(1.0, it / float(ramp_steps)) if ramp_steps > 0 else 1.0

@@ -17,7 +17,8 @@ from .series import reopen_series
 
 
 class Controller:
-    """Servo in stage 1, constant platen speed in stage 2; writes one triax.txt row per call.
+    """Servo in stage 1 (a C++ ServoPIDController labelled "servo", set here), constant platen speed
+    in stage 2; writes one triax.txt row per call.
 
     ``cfg`` keys: pressure [Pa], ramp_steps, chunk, max_chunks, tolerance, v_max [m/s], gain,
     strain_rate [1/s], shear_steps, platen_radius [m] (the platens are fixed spheres of that
@@ -68,22 +69,27 @@ class Controller:
         return self.cfg["pressure"] * law.ramp(O.iter, self.cfg["ramp_steps"]) * self.corr
 
     def apply_pressure(self):
-        """The membrane's nodal forces for the next ``update_every`` steps."""
+        """The boundary's forces for the next ``update_every`` steps, and the servo's settings."""
         self.membrane.apply_pressure(self.pressure_now(), *self.platens())
+        self.update_servo()
 
     def set_velocity(self, v):
         O.bodies[self.top].state.vel = Vector3(0, 0, v)
 
-    def servo(self):
-        """Stage 1: v = -v_max clip(g (1 - sigma_top/p), -1, 1), sigma_top = F_top / A."""
+    def servo_engine(self):
+        """The stage-1 servo, a ServoPIDController on the top platen (label "servo"; after O.load too)."""
+        return next(e for e in O.engines if e.label == "servo")
+
+    def update_servo(self):
+        """Stage 1: the servo's target force and gain from the ramped pressure and the current
+        cross-section (:func:`.control.servo_pid_settings`): v = -v_max clip(g (1 - sigma_top/p), -1, 1)
+        with sigma_top = F_top / A, run in C++ every ``servo_every`` steps."""
         if self.stage != 1:
             return
         c = self.cfg
-        p_now = c["pressure"] * law.ramp(O.iter, c["ramp_steps"])
-        s_top = O.forces.f(self.top)[2] / self.area
-        err = 1.0 - s_top / p_now if p_now > 0 else 1.0
-        self.v = law.servo_velocity(err, c["gain"], c["v_max"])
-        self.set_velocity(self.v)
+        s = self.servo_engine()
+        s.target, s.kP = law.servo_pid_settings(c["pressure"] * law.ramp(O.iter, c["ramp_steps"]), self.area,
+                                                c["gain"], c["v_max"], c["pressure"])
 
     # -- stage switches -------------------------------------------------------------------------
     def grain_drag_on(self):
@@ -145,7 +151,11 @@ class Controller:
             elif O.iter % c["chunk"] == 0:
                 self.chunk_rows = []
                 self.membrane.relax()
-        self.set_velocity(self.v)
+        if self.stage == 1:
+            self.v = self.servo_engine().curVel          # the servo moves the platen in stage 1
+            self.update_servo()
+        else:
+            self.set_velocity(self.v)
         self.out.flush()
 
     def _end_chunk(self, H):
@@ -167,6 +177,7 @@ class Controller:
             if self.chunks >= c["max_chunks"]:
                 print("ISO did not converge within %d chunks" % c["max_chunks"], flush=True)
             self.stage = 2
+            self.servo_engine().dead = True
             self.restore_friction()
             self.drop_grain_drag()
             self.v = -c["strain_rate"] * H
