@@ -183,3 +183,17 @@ def test_shell_cells_clamp_grains_beyond_the_platens_and_the_seam():
     pos = np.array([(1.0, 0.0, -0.1), (1.0, 0.0, 1.2), (-1.0, -1e-18, 0.5), (-1.0, 0.0, 0.5)])
     c = shell.cells(pos, 0.0, 1.0, bands=2, sectors=4)
     assert c.tolist() == [0 * 4 + 2, 1 * 4 + 2, 1 * 4 + 0, 1 * 4 + 3]
+
+
+def test_yade_membrane_substitute_is_recorded_and_unknown_names_are_refused():
+    """YADE has a membrane, yet a case may name ``yade.membrane: shell_pressure`` (the LIGGGHTS
+    boundary, for like-for-like runs): recorded as a substitution; another name is refused."""
+    from engines.base import UnsupportedFeature
+    from engines.yade import Yade
+    eng = Yade()
+    feats = ["hertz", "membrane"]
+    assert eng.check(feats, {}) == [] and eng.check(feats, {"liggghts.membrane": "shell_pressure"}) == []
+    subs = eng.check(feats, {"yade.membrane": "shell_pressure"})
+    assert [(s.feature, s.mechanism) for s in subs] == [("membrane", "shell_pressure")]
+    with pytest.raises(UnsupportedFeature, match="yade.membrane: rubber' is not offered"):
+        eng.check(feats, {"yade.membrane": "rubber"})
