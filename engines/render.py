@@ -69,6 +69,10 @@ def scene_templates(engine: str, scene: str) -> list[str] | None:
     return sorted(seen)
 
 
+#: where the engines' runtime packages live (engines/<engine>_runtime/, beside this module)
+RUNTIMES = Path(__file__).resolve().parent
+
+
 def templates_hash(engine: str, scene: str) -> str:
     """Hash of the templates a scene's deck uses (:func:`scene_templates`; all of the engine's
     when that cannot be told), for run directories: editing another scene's deck leaves this
@@ -80,4 +84,9 @@ def templates_hash(engine: str, scene: str) -> str:
     for name in names:
         h.update(name.encode())
         h.update((TEMPLATES / name).read_bytes())
+    # the Python an engine copies beside its deck (engines/<engine>_runtime/) is part of the deck
+    runtime = RUNTIMES / f"{engine}_runtime"
+    for f in sorted(runtime.rglob("*.py")):
+        h.update(f.relative_to(runtime).as_posix().encode())
+        h.update(f.read_bytes())
     return h.hexdigest()

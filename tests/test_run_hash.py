@@ -8,6 +8,7 @@ import shutil
 import pytest
 
 import engines.render as render
+from engines.yade.adapter import RUNTIME
 
 
 @pytest.fixture
@@ -17,6 +18,8 @@ def templates_copy(tmp_path, monkeypatch):
     root = tmp_path / "templates"
     shutil.copytree(render.TEMPLATES, root)
     monkeypatch.setattr(render, "TEMPLATES", root)
+    (tmp_path / "engines").mkdir()
+    monkeypatch.setattr(render, "RUNTIMES", tmp_path / "engines")
     return root
 
 
@@ -24,7 +27,7 @@ def test_scene_templates_follow_includes():
     names = render.scene_templates("liggghts", "shear_cell")
     assert "liggghts/shear_cell.in.j2" in names and "liggghts/partials/header.j2" in names
     assert "liggghts/triaxial.in.j2" not in names
-    assert "yade/partials/wall_contacts.py.j2" in render.scene_templates("yade", "shear_cell")
+    assert "yade/partials/contact_walls.py.j2" in render.scene_templates("yade", "shear_cell")
     assert render.scene_templates("yade", "no_such_scene") is None
 
 
@@ -37,6 +40,17 @@ def test_hash_ignores_other_scenes_but_not_shared_partials(templates_copy):
     header = templates_copy / "liggghts" / "partials" / "header.j2"
     header.write_text(header.read_text() + "\n# edited\n")
     assert render.templates_hash("liggghts", "shear_cell") != after["shear_cell"]
+
+
+def test_hash_covers_the_runtime_copied_beside_the_deck(templates_copy):
+    """YADE's deck imports engines/yade_runtime (copied into the run directory): editing it changes
+    every YADE scene's hash and no LIGGGHTS one."""
+    runtime = templates_copy.parent / "engines" / "yade_runtime"
+    shutil.copytree(RUNTIME, runtime)
+    before = render.templates_hash("yade", "shear_cell"), render.templates_hash("liggghts", "shear_cell")
+    (runtime / "control.py").write_text((runtime / "control.py").read_text() + "\n# edited\n")
+    after = render.templates_hash("yade", "shear_cell"), render.templates_hash("liggghts", "shear_cell")
+    assert after[0] != before[0] and after[1] == before[1]
 
 
 def test_run_hash_ignores_the_stability_report_wording():

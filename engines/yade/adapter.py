@@ -8,6 +8,7 @@ written by ``O.save`` (atomic rename) and reloaded with ``O.load``.
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -17,11 +18,13 @@ from orchestrator.frames import FrameWriter
 from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
-from ..base import Engine, EngineError, tail
+from ..base import Engine, EngineError, Substitution, UnsupportedFeature, tail
 from ..render import render_template
 from .output import ChunkOutput, chunk_files, membrane_series
 
 _PROGRESS = re.compile(r"^PROGRESS (\d+)")
+#: the decks' Python (controllers, membrane, recorder, monitors), copied beside every script
+RUNTIME = Path(__file__).resolve().parents[1] / "yade_runtime"
 
 
 class Yade(Engine):
@@ -57,11 +60,30 @@ class Yade(Engine):
         "torsion_friction": {
             "mindlin_ktwist_elastic": "Mindlin ktwist: elastic twisting spring with no limit",
         },
+        "membrane": {
+            "shell_pressure": "instead of the PFacet membrane (which YADE has), the LIGGGHTS deck's lateral "
+                              "boundary: radial forces p·(cell envelope area)·r_i²/Σr_j² on the outer shell of "
+                              "grains of each band x sector cell (yade_runtime/shell.py), for like-for-like "
+                              "comparisons; only when named as yade.membrane",
+        },
         "seed000_damping": {
             "tsuji_restitution": "Tsuji damping (force ∝ δ^1/4 δ̇) with the restitution that seed 000's "
                                  "γ_n = sqrt(4/3 E* m*) delivers, instead of force ∝ δ^1/2 δ̇",
         },
     }
+
+    def check(self, features, accepted):
+        """As :meth:`Engine.check`; a case may also name ``yade.membrane: shell_pressure`` although
+        YADE has a membrane: the substitution is then recorded like any other."""
+        subs = super().check(features, accepted)
+        choice = accepted.get(f"{self.name}.membrane")
+        if "membrane" in features and choice is not None:
+            offered = self.substitutes["membrane"]
+            if choice not in offered:
+                raise UnsupportedFeature(f"contact.substitutes: '{self.name}.membrane: {choice}' is not offered by "
+                                         f"{self.name}; it offers " + "; ".join(f"'{k}': {v}" for k, v in offered.items()))
+            subs.append(Substitution("membrane", choice, offered[choice]))
+        return subs
 
     def _probe_version(self) -> str:
         try:
@@ -86,17 +108,21 @@ class Yade(Engine):
             "yade_fields": fields, "yade_contacts": bool(o.contacts),
             # keep a chunk under ~20 MB of doubles
             "chunk_frames": int(max(1, min(256, 20e6 / (8 * 13 * n)))),
+            # triaxial lateral boundary: the PFacet membrane, or the LIGGGHTS deck's shell pressure
+            "yade_shell": case.contact.substitutes.get("yade.membrane") == "shell_pressure",
         }
         script = run_dir / ("resume.py" if resume else "script.py")
+        shutil.copytree(RUNTIME, run_dir / "yade_runtime", dirs_exist_ok=True,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         render_template(f"yade/{case.scene.kind}.py.j2", ctx, script)
         return script
 
     def print_monitors(self, deck_text: str, overlap_limit: float) -> str:
-        """templates/yade/partials/monitors.py.j2: the trip threshold, and a print at each check."""
-        text = deck_text.replace("def orch_monitor():\n    m = ORCH_MON\n",
-                                 f"def orch_monitor():\n    m = ORCH_MON\n    m['overlap_limit'] = {overlap_limit!r}\n")
-        return text.replace('    ov = dmax / m["r_min"]\n',
-                            '    ov = dmax / m["r_min"]\n    print("ORCH_OV %d %r %r" % (O.iter + 1, ov, ke), flush=True)\n')
+        """The monitor settings (``ORCH_MON``, read by yade_runtime/monitors.py) get the overlap
+        limit and ``print_figures`` (an ORCH_OV line at every check)."""
+        return re.sub(r"^(ORCH_MON = json\.loads\(.*\)\n)",
+                      lambda m: m.group(1) + f"ORCH_MON['overlap_limit'] = {overlap_limit!r}\nORCH_MON['print_figures'] = True\n",
+                      deck_text, count=1, flags=re.M)
 
     def command(self, deck: Path, case) -> list[str]:
         return [self.executable, "-n", "-j", str(case.engine_options.threads), "-x", deck.name]

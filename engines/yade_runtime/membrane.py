@@ -1,61 +1,62 @@
-# --- flexible membrane: GridNodes + GridConnections + PFacets (yade.gridpfacet) ---------------
-# Nodes (CohFrictMat, cohesive connections) carry the sheet's stiffness E_m t; the facets
-# (CpmMat, so that Ip2_FrictMat_CpmMat_FrictPhys gives grain-facet contacts linear FrictPhys with
-# kn = {{ mb.k_contact | num }} N/m while grain-grain contacts stay Hertz-Mindlin: no
-# "Ambiguous dispatch"). The confining pressure is applied as nodal forces p A_f/3 along each
-# facet's current inward normal (follow-the-surface), refreshed every {{ mb.update_every }} steps.
+"""Flexible membrane of the YADE triaxial deck: GridNodes + GridConnections + PFacets
+(yade.gridpfacet) around the sample, loaded by a follow-the-surface pressure as nodal forces.
+
+Nodes (CohFrictMat, cohesive connections) carry the sheet's stiffness E_m t; the facets (CpmMat,
+so that Ip2_FrictMat_CpmMat_FrictPhys gives grain-facet contacts linear FrictPhys with kn =
+``k_contact`` while grain-grain contacts stay Hertz-Mindlin: no "Ambiguous dispatch"). The
+pressure p A_f/3 along each facet's current inward normal is refreshed every ``update_every``
+steps (:func:`.mesh.pressure_forces`). All numbers come from ``orchestrator.scenes.triaxial``
+(``params["scene"]["membrane"]``, passed as ``cfg``)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from yade import O, Vector3
+from yade.gridpfacet import gridConnection, gridNode, pfacet
+from yade.wrapper import CohFrictMat, CohFrictPhys, CpmMat
+
+from . import mesh
+from .series import save_npz_atomic
+
+
 class Membrane:
-    def __init__(self, z_bot, z_top):
-        nt, nz = {{ mb.n_theta }}, {{ mb.n_z }}
-        rn = {{ mb.node_radius | num }}
+    """``cfg``: the derived membrane numbers (n_theta, n_z, node_radius, E_conn, E_facet, density,
+    friction, node_mass, damping [N s/m], contact_damping [fraction of critical],
+    contact_damping_lagged); ``radius0``: the sample's radius [m]; ``z_bot``, ``z_top``: the
+    platens [m]."""
+
+    def __init__(self, cfg: dict, radius0: float, z_bot: float, z_top: float):
+        self.cfg = cfg
+        nt, nz = cfg["n_theta"], cfg["n_z"]
+        rn = self.rn = cfg["node_radius"]
         # node centres: the facets' inner faces (chords, offset rn inwards) clear the outermost grain
-        R = ({{ sc.radius0 | num }} + rn) / math.cos(math.pi / nt)
-        self.rn = rn
+        R = (radius0 + rn) / math.cos(math.pi / nt)
         node_mat = O.materials.append(CohFrictMat(
-            young={{ mb.E_conn | num }}, poisson=1.0, density={{ mb.density | num }}, frictionAngle=0.0,
+            young=cfg["E_conn"], poisson=1.0, density=cfg["density"], frictionAngle=0.0,
             normalCohesion=1e300, shearCohesion=1e300, momentRotationLaw=True, alphaKr=0.1, alphaKtw=0.1,
             label="membrane_nodes"))
         # grain-membrane friction: Ip2_FrictMat_CpmMat_FrictPhys gave tan(phi) of the facet material
         # (checked: phys.tangensOfFrictionAngle), so this is the grain-membrane coefficient
         facet_mat = O.materials.append(CpmMat(
-            young={{ mb.E_facet | num }}, poisson=1.0, density={{ mb.density | num }},
-            frictionAngle=math.atan({{ mb.friction | num }}), label="membrane_facets"))
+            young=cfg["E_facet"], poisson=1.0, density=cfg["density"],
+            frictionAngle=math.atan(cfg["friction"]), label="membrane_facets"))
         # rows from one row below the bottom platen to one row above the top platen: the ends are
         # free (no node is tied to a platen) and the overhang carries no pressure
         dz = (z_top - z_bot) / nz
         nz = nz + 2
         self.nt, self.nz = nt, nz
         self.nodes = []
-        for k in range(nz + 1):
-            z = z_bot - dz + dz * k
-            for i in range(nt):
-                th = 2 * math.pi * (i + 0.5 * (k % 2)) / nt
-                b = gridNode((R * math.cos(th), R * math.sin(th), z), rn, wire=False, fixed=False, material=node_mat)
-                b.groupMask = 0b100
-                nid = O.bodies.append(b)
-                self.nodes.append(nid)
-        node = lambda i, k: self.nodes[k * nt + (i % nt)]
-        self.bottom_ring = [node(i, 0) for i in range(nt)]
-        self.top_ring = [node(i, nz) for i in range(nt)]
-        edges = set()
-        tris = []
-        for k in range(nz):
-            for i in range(nt):
-                # rows are staggered by half a cell: two triangles per cell, counter-clockwise
-                # seen from outside so that (b-a)x(c-a) points outwards
-                if k % 2 == 0:
-                    t1 = (node(i, k), node(i + 1, k), node(i, k + 1))
-                    t2 = (node(i + 1, k), node(i + 1, k + 1), node(i, k + 1))
-                else:
-                    t1 = (node(i, k), node(i + 1, k), node(i + 1, k + 1))
-                    t2 = (node(i, k), node(i + 1, k + 1), node(i, k + 1))
-                for t in (t1, t2):
-                    tris.append(t)
-                    for a, b in ((t[0], t[1]), (t[1], t[2]), (t[0], t[2])):
-                        edges.add((min(a, b), max(a, b)))
+        for xyz in mesh.node_positions(nt, nz, R, z_bot - dz, dz).tolist():
+            b = gridNode(tuple(xyz), rn, wire=False, fixed=False, material=node_mat)
+            b.groupMask = 0b100
+            self.nodes.append(O.bodies.append(b))
+        self.bottom_ring = self.nodes[:nt]
+        self.top_ring = self.nodes[nz * nt:]
+        tris = [tuple(self.nodes[i] for i in t) for t in mesh.triangles(nt, nz).tolist()]
         # yade.gridpfacet's gridConnection/pfacet return Bodies to append (and add the
         # connections' mass to the nodes: the nodes' mass is set afterwards)
-        for a, b in sorted(edges):
+        for a, b in self._edges(tris):
             O.bodies.append(gridConnection(a, b, rn, material=node_mat, mask=0b100))
         self.facets = []
         for a, b, c in tris:
@@ -64,34 +65,34 @@ class Membrane:
             self.facets.append(O.bodies.append(pfacet(a, b, c, wire=False, material=facet_mat, mask=0b110)))
         for nid in self.nodes:
             st = O.bodies[nid].state
-            st.mass = {{ mb.node_mass | num }}
+            st.mass = cfg["node_mass"]
             st.inertia = Vector3(1, 1, 1) * (0.4 * st.mass * rn * rn)
-        self._index(tris, edges)
+        self._index(tris)
 
-    def _index(self, tris, edges):
+    @staticmethod
+    def _edges(tris):
+        out = set()
+        for t in tris:
+            for a, b in ((t[0], t[1]), (t[1], t[2]), (t[0], t[2])):
+                out.add((min(a, b), max(a, b)))
+        return sorted(out)
+
+    def _index(self, tris):
         """Lookups over the built mesh (node states, neighbours, local triangles) and constants;
         shared by the constructor and restore()."""
+        cfg = self.cfg
         # the nodes' State objects, read in bulk (faster than O.bodies[i].state per call)
         self.states = [O.bodies[nid].state for nid in self.nodes]
-        # neighbours for the membrane's internal viscosity (relative damping, see damp())
-        nb = {nid: set() for nid in self.nodes}
-        for a, b in edges:
-            nb[a].add(b)
-            nb[b].add(a)
         self.tri = np.array(tris, dtype=int)
         self.index = {nid: k for k, nid in enumerate(self.nodes)}
         self.tri_local = np.vectorize(self.index.get)(self.tri)
-        n = len(self.nodes)
-        L = np.zeros((n, n))
-        for a, bs in nb.items():
-            for b in bs:
-                L[self.index[a], self.index[b]] = 1.0 / len(bs)
-        self.avg = L                      # row k: mean over node k's neighbours
-        self.c_damp = {{ mb.damping | num }}
-        self.c_contact = {{ mb.contact_damping | num }}
-        self.lagged_dashpot = {{ (mb.contact_damping_lagged | default(false)) | num }}
-        self.damped_grains = set()
-        self.node_mass = {{ mb.node_mass | num }}
+        local_edges = [(self.index[a], self.index[b]) for a, b in self._edges(tris)]
+        self.avg = mesh.neighbour_mean_matrix(len(self.nodes), local_edges)
+        self.c_damp = cfg["damping"]
+        self.c_contact = cfg["contact_damping"]
+        self.lagged_dashpot = bool(cfg.get("contact_damping_lagged", False))
+        self.damped_grains = getattr(self, "damped_grains", set())
+        self.node_mass = cfg["node_mass"]
 
     # -- resume: O.save keeps the bodies (with their ids) but not this Python object -------------
     def get_state(self):
@@ -108,21 +109,17 @@ class Membrane:
                            "position": [np.asarray(x).tolist() for x in fr["position"]]}}
 
     @classmethod
-    def restore(cls, state):
+    def restore(cls, cfg: dict, state: dict):
         """The Membrane of a loaded checkpoint (O.load): re-attached to its bodies by id, lookups
         rebuilt from the saved triangles exactly as the constructor builds them, permanent nodal
         and dashpot forces re-applied, recorded frames reloaded."""
         self = cls.__new__(cls)
+        self.cfg = cfg
         self.nodes, self.facets = list(state["nodes"]), list(state["facets"])
         self.nt, self.nz, self.rn = state["nt"], state["nz"], state["rn"]
         self.bottom_ring, self.top_ring = list(state["bottom_ring"]), list(state["top_ring"])
-        tris = [tuple(t) for t in state["tri"]]
-        edges = set()
-        for t in tris:
-            for a, b in ((t[0], t[1]), (t[1], t[2]), (t[0], t[2])):
-                edges.add((min(a, b), max(a, b)))
-        self._index(tris, edges)
         self.damped_grains = set(state["damped_grains"])
+        self._index([tuple(t) for t in state["tri"]])
         for i, f in state["perm"].items():
             O.forces.setPermF(int(i), Vector3(*f))
         fr = state["frames"]
@@ -130,9 +127,8 @@ class Membrane:
                        "position": [np.asarray(x, dtype=float).reshape(-1, 3) for x in fr["position"]]}
         return self
 
-
     def _contacts(self):
-        """Real grain-facet contacts: (grain state, facet's node ids, node states, normal, c)."""
+        """Real grain-facet contacts: (grain id, grain state, facet's node ids, node states, normal, c)."""
         if not hasattr(self, "fcache"):
             B = O.bodies
             self.fcache = []
@@ -168,10 +164,10 @@ class Membrane:
     def contact_damping(self):
         """A normal dashpot on every grain-membrane contact (YADE's linear FrictPhys/CundallStrack
         law has none): F = -c (v_grain - v_facet).n n on the grain, the opposite shared by the
-        facet's three nodes; c is ``membrane.contact_damping`` of critical for the grain and the
-        three nodes on the contact stiffness. Without it the grain-membrane contacts, whose force
-        jumps when a contact passes from one facet to the next, pumped energy into the sample as
-        soon as the stage-1 drag was removed."""
+        facet's three nodes; c is ``contact_damping`` of critical for the grain and the three nodes
+        on the contact stiffness. Without it the grain-membrane contacts, whose force jumps when a
+        contact passes from one facet to the next, pumped energy into the sample as soon as the
+        stage-1 drag was removed."""
         addF = O.forces.addF
         for g, gs, nodes, nst, n, c in self._contacts():
             vf = (nst[0].vel + nst[1].vel + nst[2].vel) / 3.0
@@ -195,39 +191,28 @@ class Membrane:
                     I.phys.moment_bending = Vector3.Zero
 
     def positions(self):
-        return np.fromiter((c for st in self.states for c in st.pos), float, 3 * len(self.states)).reshape(-1, 3)
+        """(n_nodes, 3) node positions [m]. Indexing a minieigen Vector3 is ~8x faster than iterating
+        it (iteration ends on an IndexError per vector): 0.33 vs 2.6 ms for 84 nodes."""
+        out = []
+        for st in self.states:
+            x = st.pos
+            out.append((x[0], x[1], x[2]))
+        return np.array(out)
 
     def velocities(self):
-        return np.fromiter((c for st in self.states for c in st.vel), float, 3 * len(self.states)).reshape(-1, 3)
-
-    def _facets(self, x=None):
-        x = self.positions() if x is None else x
-        a, b, c = x[self.tri_local[:, 0]], x[self.tri_local[:, 1]], x[self.tri_local[:, 2]]
-        av = 0.5 * np.cross(b - a, c - a)       # outward area vectors
-        cen = (a + b + c) / 3.0
-        return av, cen
+        """(n_nodes, 3) node velocities [m/s] (as :meth:`positions`)."""
+        out = []
+        for st in self.states:
+            v = st.vel
+            out.append((v[0], v[1], v[2]))
+        return np.array(out)
 
     def apply_pressure(self, p, zb, zt):
-        """Permanent nodal forces until the next call: the pressure, p A_f / 3 along each facet's
-        inward normal, plus the membrane's internal viscosity F_k = -c (v_k - <v_j>_neighbours),
-        which leaves a uniform motion of the membrane (the sample bulging) unresisted and damps
-        node oscillations on the grain contacts."""
-        x = self.positions()
-        av, cen = self._facets(x)
-        # only the membrane beside the sample is loaded: each facet by the fraction of its height
-        # between the platens
-        z = x[self.tri_local, 2]
-        lo, hi = z.min(axis=1), z.max(axis=1)
-        frac = np.clip((np.minimum(hi, zt) - np.maximum(lo, zb)) / np.maximum(hi - lo, 1e-300), 0.0, 1.0)
-        # the pressure acts on the node-centre surface; scale it so that the force per unit area of
-        # the inner surface (what the grains feel) is p: factor = inner/centre perimeter
-        xr = x.reshape(self.nz + 1, self.nt, 3)
-        per = np.mean(np.sum(np.hypot(np.roll(xr[:, :, 0], -1, axis=1) - xr[:, :, 0],
-                                      np.roll(xr[:, :, 1], -1, axis=1) - xr[:, :, 1]), axis=1))
-        p_eff = p * (per - 2 * math.pi * self.rn) / per
-        f = np.zeros((len(self.nodes), 3))
-        for col in range(3):
-            np.add.at(f, self.tri_local[:, col], -p_eff * frac[:, None] * av / 3.0)
+        """Permanent nodal forces until the next call: the pressure (:func:`.mesh.pressure_forces`),
+        plus the membrane's internal viscosity F_k = -c (v_k - <v_j>_neighbours), which leaves a
+        uniform motion of the membrane (the sample bulging) unresisted and damps node oscillations
+        on the grain contacts."""
+        f = mesh.pressure_forces(self.positions(), self.tri_local, self.nt, self.rn, p, zb, zt)
         if self.c_damp > 0:
             v = self.velocities()
             f -= self.c_damp * (v - self.avg @ v)
@@ -246,20 +231,9 @@ class Membrane:
             O.forces.setPermF(nid, Vector3(*fk))
 
     def geometry(self, zb, zt):
-        """Volume and lateral area of the membrane's inner surface between the platens: each
-        node row is a closed polygon; its area and perimeter (node-centre polygon, shrunk by the
-        node radius) are interpolated linearly in z between rows and integrated from zb to zt."""
-        x = self.positions().reshape(self.nz + 1, self.nt, 3)
-        xs, ys = x[:, :, 0], x[:, :, 1]
-        area = 0.5 * np.abs(np.sum(xs * np.roll(ys, -1, axis=1) - np.roll(xs, -1, axis=1) * ys, axis=1))
-        per = np.sum(np.hypot(np.roll(xs, -1, axis=1) - xs, np.roll(ys, -1, axis=1) - ys), axis=1)
-        area_in = area - self.rn * per + math.pi * self.rn ** 2
-        per_in = per - 2 * math.pi * self.rn
-        zr = x[:, :, 2].mean(axis=1)
-        zq = np.linspace(zb, zt, 401)
-        a_q = np.interp(zq, zr, area_in)
-        p_q = np.interp(zq, zr, per_in)
-        return {"volume": float(np.trapz(a_q, zq)), "area": float(np.trapz(p_q, zq))}
+        """Volume [m^3] and lateral area [m^2] inside the membrane between the platens
+        (:func:`.mesh.inner_geometry`)."""
+        return mesh.inner_geometry(self.positions(), self.nt, self.rn, zb, zt)
 
     def lateral_force(self):
         """Total radial force the membrane exerts on the grains, inward positive [N]."""
@@ -287,6 +261,5 @@ class Membrane:
         self.frames["position"].append(self.positions())
 
     def save(self, name):
-        np.savez(name + ".partial.npz", iter=np.array(self.frames["iter"]), time=np.array(self.frames["time"]),
-                 position=np.array(self.frames["position"]), triangles=self.tri_local, node_radius=self.rn)
-        os.replace(name + ".partial.npz", name)
+        save_npz_atomic(name, iter=np.array(self.frames["iter"]), time=np.array(self.frames["time"]),
+                        position=np.array(self.frames["position"]), triangles=self.tri_local, node_radius=self.rn)

@@ -1,0 +1,232 @@
+"""Controller of the YADE triaxial deck: stage 1 isotropic compression (pressure ramp, axial force
+servo, membrane correction, convergence on chunk means), stage 2 strain-controlled axial loading;
+one ``triax.txt`` row per call; checkpoints with the Python state. All numbers come from
+``orchestrator.scenes.triaxial`` (passed as ``cfg``); the laws are in :mod:`.control`."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+
+from yade import O, Vector3
+
+from . import control as law
+from .recorder import save_checkpoint
+from .series import reopen_series
+
+
+class Controller:
+    """Servo in stage 1 (a C++ ServoPIDController labelled "servo", set here), constant platen speed
+    in stage 2; writes one triax.txt row per call.
+
+    ``cfg`` keys: pressure [Pa], ramp_steps, chunk, max_chunks, tolerance, v_max [m/s], gain,
+    strain_rate [1/s], shear_steps, platen_radius [m] (the platens are fixed spheres of that
+    radius), radius0 [m], series_columns, correction_rows, correction_gain, correction_limit,
+    drag_free_end, node_drag, friction, iso_friction, particle_mat (material id).
+    ``bodies``: bot, top (platen ids), ids, pids (grains), clump_ids (or None).
+    ``membrane``: a :class:`.membrane.Membrane`; ``rec``: the :class:`.recorder.Recorder`;
+    ``drag``: the stage-1 LinearDragEngine; ``state``: a checkpoint's saved state (resume)."""
+
+    #: what a checkpoint keeps of a Controller (get_state / the constructor's ``state``)
+    STATE = ("stage", "v", "chunk_rows", "chunks", "shear_end", "area", "corr", "s3_avg")
+
+    def __init__(self, cfg, bodies, membrane, rec, drag, state=None):
+        self.cfg, self.membrane, self.rec, self.drag = cfg, membrane, rec, drag
+        self.bot, self.top = bodies["bot"], bodies["top"]
+        self.ids, self.pids = [int(i) for i in bodies["ids"]], [int(i) for i in bodies["pids"]]
+        self.clump_ids = bodies.get("clump_ids")
+        self.grain_set = set(self.ids)
+        self.rows = []
+        if state is not None:               # resumed: the state saved with the checkpoint
+            for k in self.STATE:
+                setattr(self, k, state[k])
+            self.chunk_rows = [tuple(r) for r in self.chunk_rows]
+            self.out = reopen_series("triax.txt", O.iter)
+            return
+        self.stage = 1
+        self.v = 0.0
+        self.chunk_rows = []
+        self.chunks = 0
+        self.out = open("triax.txt", "w")
+        self.out.write("# " + " ".join(cfg["series_columns"]) + "\n")
+        self.shear_end = None
+        self.area = math.pi * cfg["radius0"] ** 2
+        # membrane correction: the nodal pressure is P * corr, corr in [1 - limit, 1 + limit],
+        # adjusted slowly so that the lateral stress measured on the grains (sigma3 from the
+        # grain-membrane contacts, averaged over ~correction_rows rows) equals P
+        self.corr = 1.0
+        self.s3_avg = None
+
+    # -- the loads ------------------------------------------------------------------------------
+    def platens(self):
+        """Inner faces of the bottom and top platens [m]."""
+        rb = self.cfg["platen_radius"]
+        return O.bodies[self.bot].state.pos[2] + rb, O.bodies[self.top].state.pos[2] - rb
+
+    def pressure_now(self):
+        """Nodal pressure [Pa]: p ramped, times the membrane correction."""
+        return self.cfg["pressure"] * law.ramp(O.iter, self.cfg["ramp_steps"]) * self.corr
+
+    def apply_pressure(self):
+        """The boundary's forces for the next ``update_every`` steps, and the servo's settings."""
+        self.membrane.apply_pressure(self.pressure_now(), *self.platens())
+        self.update_servo()
+
+    def set_velocity(self, v):
+        O.bodies[self.top].state.vel = Vector3(0, 0, v)
+
+    def servo_engine(self):
+        """The stage-1 servo, a ServoPIDController on the top platen (label "servo"; after O.load too)."""
+        return next(e for e in O.engines if e.label == "servo")
+
+    def update_servo(self):
+        """Stage 1: the servo's target force and gain from the ramped pressure and the current
+        cross-section (:func:`.control.servo_pid_settings`): v = -v_max clip(g (1 - sigma_top/p), -1, 1)
+        with sigma_top = F_top / A, run in C++ every ``servo_every`` steps."""
+        if self.stage != 1:
+            return
+        c = self.cfg
+        s = self.servo_engine()
+        s.target, s.kP = law.servo_pid_settings(c["pressure"] * law.ramp(O.iter, c["ramp_steps"]), self.area,
+                                                c["gain"], c["v_max"], c["pressure"])
+
+    # -- stage switches -------------------------------------------------------------------------
+    def grain_drag_on(self):
+        """Whether the stage-1 Stokes drag still acts on the grains (LinearDragEngine state, saved with O.save)."""
+        d = self.drag
+        return not d.dead and len(d.ids) > 0 and d.ids[0] in self.grain_set
+
+    def drop_grain_drag(self):
+        """The grains' drag ends (idempotent). With ``node_drag`` the membrane nodes keep it:
+        numerical damping of the sheet's own motion only."""
+        if self.cfg["node_drag"]:
+            self.drag.ids = list(self.membrane.nodes)
+            self.drag.dead = False
+        else:
+            self.drag.dead = True
+
+    def restore_friction(self):
+        """End of stage 1: the grains' material and every existing grain-grain contact get
+        contact.friction (MindlinPhys.tangensOfFrictionAngle; grain-platen and grain-membrane
+        contacts keep theirs). Nothing to do when stage 1 used the same friction."""
+        mu = self.cfg["friction"]
+        if self.cfg["iso_friction"] == mu:
+            return
+        O.materials[self.cfg["particle_mat"]].frictionAngle = math.atan(mu)
+        n = 0
+        gs = self.grain_set
+        for I in O.interactions:
+            if I.isReal and I.id1 in gs and I.id2 in gs:
+                I.phys.tangensOfFrictionAngle = mu
+                n += 1
+        print("FRICTION restored to %g on %d grain-grain contacts" % (mu, n), flush=True)
+
+    # -- the series row and the stage logic (every series_every steps) ---------------------------
+    def __call__(self, final=False):
+        c = self.cfg
+        P = c["pressure"]
+        it, t = (O.iter, O.time) if final else (O.iter + 1, O.time + O.dt)
+        zb, zt = self.platens()
+        f_top = O.forces.f(self.top)[2]          # grains push the top platen up: > 0 in compression
+        f_bot = -O.forces.f(self.bot)[2]
+        geo = self.membrane.geometry(zb, zt)
+        f_lat = self.membrane.lateral_force()
+        H = zt - zb
+        s1 = f_top / (geo["volume"] / H)
+        s3 = f_lat / geo["area"]
+        p_now = self.pressure_now()
+        if O.iter >= c["ramp_steps"] and s3 > 0:
+            self.corr, self.s3_avg = law.membrane_correction(self.corr, self.s3_avg, s3, P, c["correction_rows"],
+                                                             c["correction_gain"], c["correction_limit"])
+        # the row describes the state at the end of this iteration
+        self.out.write("%d %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n" % (
+            it, t, self.stage, zb, zt, f_bot, f_top, f_lat, geo["area"], geo["volume"], p_now))
+        if self.stage == 1:
+            self.chunk_rows.append((s1, s3))
+            self.area = geo["volume"] / H
+            # this runner fires at O.iter = 0 mod series_every, and the chunk is a multiple of it
+            if O.iter % c["chunk"] == 0 and O.iter >= c["ramp_steps"]:
+                self._end_chunk(H)
+            elif O.iter % c["chunk"] == 0:
+                self.chunk_rows = []
+                self.membrane.relax()
+        if self.stage == 1:
+            self.v = self.servo_engine().curVel          # the servo moves the platen in stage 1
+            self.update_servo()
+        else:
+            self.set_velocity(self.v)
+        self.out.flush()
+
+    def _end_chunk(self, H):
+        c = self.cfg
+        P = c["pressure"]
+        self.chunks += 1
+        m1 = sum(r[0] for r in self.chunk_rows) / len(self.chunk_rows)
+        m3 = sum(r[1] for r in self.chunk_rows) / len(self.chunk_rows)
+        print("ISO chunk %d: sigma1/p = %.4f sigma3/p = %.4f" % (self.chunks, m1 / P, m3 / P), flush=True)
+        self.chunk_rows = []
+        self.membrane.relax()
+        conv = law.iso_converged(m1, m3, P, c["tolerance"])
+        if c["drag_free_end"] and conv and self.grain_drag_on():
+            # converged with the drag: switch it off and converge again without it
+            self.drop_grain_drag()
+            conv = False
+            print("ISO converged with drag: drag off, continuing", flush=True)
+        if conv or self.chunks >= c["max_chunks"]:
+            if self.chunks >= c["max_chunks"]:
+                print("ISO did not converge within %d chunks" % c["max_chunks"], flush=True)
+            self.stage = 2
+            self.servo_engine().dead = True
+            self.restore_friction()
+            self.drop_grain_drag()
+            self.v = -c["strain_rate"] * H
+            self.shear_end = O.iter + 1 + c["shear_steps"]
+            O.stopAtIter = self.shear_end
+            print("SHEAR start at iter %d, H0 = %.9g m, v = %.6g m/s" % (O.iter + 1, H, self.v), flush=True)
+
+    def stop_iter(self):
+        """The run ends after the loading steps (set at the stage switch), or after the longest stage 1."""
+        c = self.cfg
+        if self.stage == 2:
+            return self.shear_end
+        return c["ramp_steps"] + c["chunk"] * (c["max_chunks"] + 1) + c["shear_steps"]
+
+    # -- resume ---------------------------------------------------------------------------------
+    def get_state(self):
+        return {k: getattr(self, k) for k in self.STATE}
+
+    def checkpoint(self):
+        """Flush frames, then save the simulation for resume with the Python state (controller,
+        membrane with its recorded frames and permanent forces, body ids) as JSON in O.tags: one
+        file, one atomic rename, so the state always belongs to the checkpoint it is in
+        (docs/triaxial.md, Resume). Run from a PyRunner placed FIRST in O.engines."""
+        self.rec.flush()
+        t0 = time.time()
+        state = {"iter": O.iter, "bot": self.bot, "top": self.top, "ids": self.ids, "pids": self.pids,
+                 "membrane": self.membrane.get_state(), "control": self.get_state()}
+        if self.clump_ids is not None:
+            state["clump_ids"] = [int(i) for i in self.clump_ids]
+        O.tags["orch_triaxial"] = json.dumps(state)
+        save_checkpoint()
+        print("CHECKPOINT iter %d %.3f s" % (O.iter, time.time() - t0), flush=True)
+
+
+def load_state():
+    """The Python state saved in a loaded checkpoint (O.load), checked against O.iter."""
+    state = json.loads(O.tags["orch_triaxial"])
+    if state["iter"] != O.iter:
+        raise SystemExit("checkpoint.yade.gz: its saved state is for iteration %d, the simulation is at %d"
+                         % (state["iter"], O.iter))
+    return state
+
+
+def clump_report(name, clump_ids, pid_of):
+    """Clump body id, mass [kg], principal inertia [kg m^2] and its members' particle ids, one row per clump."""
+    with open(name + ".partial", "w") as f:
+        for c in clump_ids:
+            st = O.bodies[c].state
+            mem = sorted(pid_of[m] for m in O.bodies[c].shape.members.keys())
+            f.write("%d %.17g %.17g %.17g %.17g %s\n" % (c, st.mass, st.inertia[0], st.inertia[1], st.inertia[2],
+                                                        " ".join(str(m) for m in mem)))
+    os.replace(name + ".partial", name)
