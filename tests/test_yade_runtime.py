@@ -143,13 +143,14 @@ def test_reopen_series_keeps_rows_up_to_the_checkpoint_and_drops_a_cut_line(tmp_
 
 
 def test_stability_history_patch_reaches_the_yade_monitor():
-    """orchestrator.stability.history patches a rendered YADE deck so that the monitor
-    (yade_runtime/monitors.py) trips at the given overlap and prints its figures at every check."""
+    """The stability history (orchestrator.stability.history, through the adapter's
+    print_monitors) patches a rendered YADE deck so that the monitor (yade_runtime/monitors.py)
+    trips at the given overlap and prints its figures at every check."""
     from pathlib import Path
 
-    from orchestrator.stability.history import _patch_yade
+    from engines.yade import Yade
     golden = Path(__file__).parent / "golden" / "shear_cell_smoke__yade.golden"
-    text = _patch_yade(golden.read_text(), 4.0)
+    text = Yade().print_monitors(golden.read_text(), 4.0)
     lines = text.splitlines()
     k = next(i for i, ln in enumerate(lines) if ln.startswith("ORCH_MON = json.loads("))
     assert lines[k + 1:k + 3] == ["ORCH_MON['overlap_limit'] = 4.0", "ORCH_MON['print_figures'] = True"]
