@@ -201,3 +201,18 @@ def read_dump(path) -> tuple[int, list[str], np.ndarray]:
 COLUMNS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
             "angular_velocity": ("omegax", "omegay", "omegaz"), "force": ("fx", "fy", "fz"),
             "torque": ("tqx", "tqy", "tqz")}
+
+
+def per_atom_arrays(a: np.ndarray, cols: list[str], ids: np.ndarray, order: np.ndarray, fields) -> tuple:
+    """One snapshot ``a`` (atoms × ``cols``) as per-particle (N, 3) arrays of the frame fields in
+    ``fields`` (see :data:`COLUMNS`), rows placed by atom id into the run's particle order (``ids``,
+    with ``order = argsort(ids)``); a particle absent from the snapshot is a NaN row. Returns
+    ``(rows, arrays)``: the row of each atom of ``a`` and ``{field: array}``."""
+    rows = order[np.searchsorted(ids[order], a[:, cols.index("id")].astype(np.int64))]
+    arrays = {}
+    for field, names in COLUMNS.items():
+        if field in fields and names[0] in cols:
+            out = np.full((len(ids), 3), np.nan)
+            out[rows] = a[:, [cols.index(c) for c in names]]
+            arrays[field] = out
+    return rows, arrays

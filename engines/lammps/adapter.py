@@ -27,7 +27,7 @@ from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
 from ..base import Engine, EngineError, UnsupportedFeature, tail
-from ..lammps_dump import COLUMNS, read_binary_dump, truncate_binary_dump
+from ..lammps_dump import per_atom_arrays, read_binary_dump, truncate_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
 from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
 from ..liggghts.segments import dump_segments
@@ -204,13 +204,7 @@ class Lammps(Engine):
         with FrameWriter(run_dir / "frames.h5", ids, table["radius"], fields=fields,
                          controls=controls.keys(), mass=mass, meta=meta) as w:
             for k, (step, a) in enumerate(snaps):
-                rows = order[np.searchsorted(ids[order], a[:, cols.index("id")].astype(np.int64))]
-                arrays = {}
-                for field, names in COLUMNS.items():
-                    if field in fields and names[0] in cols:
-                        out = np.full((len(ids), 3), np.nan)
-                        out[rows] = a[:, [cols.index(c) for c in names]]
-                        arrays[field] = out
+                rows, arrays = per_atom_arrays(a, cols, ids, order, fields)
                 w.append(step * dt, step, controls={c: v[k] if k < len(v) else np.nan for c, v in controls.items()},
                          **arrays)
             for name, series in extras.get("walls", {}).items():

@@ -26,7 +26,7 @@ from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
 from ..base import Engine, EngineError, tail
-from ..lammps_dump import COLUMNS, read_binary_dump, stress_tensors, truncate_binary_dump
+from ..lammps_dump import COLUMNS, per_atom_arrays, read_binary_dump, stress_tensors, truncate_binary_dump
 from ..render import render_template
 from . import triaxial
 from .segments import dump_segments, wall_rows
@@ -263,13 +263,7 @@ class Liggghts(Engine):
                                 w.write_contacts(k, c)
                     snaps = []
             for step, a in snaps:                                        # atoms lost or inserted: frame by frame
-                rows = order[np.searchsorted(ids[order], a[:, cols.index("id")].astype(np.int64))]
-                arrays = {}
-                for field, names in COLUMNS.items():
-                    if field in fields and names[0] in cols:
-                        out = np.full((len(ids), 3), np.nan)
-                        out[rows] = a[:, [cols.index(c) for c in names]]
-                        arrays[field] = out
+                rows, arrays = per_atom_arrays(a, cols, ids, order, fields)
                 if "stress" in fields:
                     out = np.full((len(ids), 3, 3), np.nan)
                     out[rows] = stress_tensors(a, cols)
