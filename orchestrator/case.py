@@ -16,6 +16,7 @@ from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
                       model_validator)
 
 from .derive import DerivationError, derive
+from .analysis_specs import parse_specs
 from .registry import engine_names, get_scene, scene_kinds
 from .resources import templates_dir
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
@@ -274,8 +275,7 @@ class Case(Strict):
     @field_validator("analysis")
     @classmethod
     def _analysis(cls, v):
-        if v:                                  # imported only when a case asks for analyses
-            from .analysis import parse_specs
+        if v:                       # names only: the analysis stack itself is not imported here
             parse_specs(v)
         return v
 

@@ -126,6 +126,7 @@ def _clipped_restitution(force) -> float:
     return float(-sol.y[1, -1])
 
 
+@functools.lru_cache(maxsize=256)
 def restitution_input(e_target: float) -> float:
     """The restitution to give LIGGGHTS (``coefficientRestitution``) and YADE (Mindlin ``en``)
     so that a collision delivers ``e_target`` (see module docstring)."""

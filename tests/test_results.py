@@ -59,3 +59,9 @@ def test_no_band_is_said_not_hidden(tmp_path):
     (run / "analysis" / "shearband_steady.csv").write_text("r_tilde,z_sb,z_sb_err,w_sb,w_sb_err,n_fits\n")
     rows = {r.quantity: r for r in key_results(run)}
     assert rows["band fitted"].ok is False
+
+
+def test_analysis_names_known_without_the_analysis_stack_match_the_registry():
+    from orchestrator.analysis import ANALYSES
+    from orchestrator.analysis_specs import ANALYSIS_NAMES
+    assert sorted(ANALYSIS_NAMES) == sorted(ANALYSES)

@@ -20,6 +20,7 @@ import time
 import traceback
 from pathlib import Path
 
+from ..analysis_specs import parse_specs as _parse_specs
 from ..frames import Frames
 from ._common import Result, atomic_savefig, atomic_write_csv, atomic_write_json, d50, frame_indices, frame_pairs
 from .clusters import analyze_clusters, cluster_properties, find_clusters
@@ -79,29 +80,9 @@ ANALYSES = {
 
 
 def parse_specs(specs) -> list[tuple[str, dict]]:
-    """Normalise a case's ``analysis:`` list: each entry a name or ``{name: {options}}``.
-
-    Raises ValueError naming the entry when a name is unknown or options are not a mapping.
-    """
-    if specs is None:
-        return []
-    if isinstance(specs, (str, dict)):
-        specs = [specs]
-    out = []
-    for n, s in enumerate(specs):
-        if isinstance(s, str):
-            name, opts = s, {}
-        elif isinstance(s, dict) and len(s) == 1:
-            (name, opts), = s.items()
-            opts = {} if opts is None else opts
-            if not isinstance(opts, dict):
-                raise ValueError(f"analysis[{n}] ({name}): options must be a mapping, got {type(opts).__name__}")
-        else:
-            raise ValueError(f"analysis[{n}]: expected a name or {{name: {{options}}}}, got {s!r}")
-        if name not in ANALYSES:
-            raise ValueError(f"analysis[{n}]: unknown analysis {name!r}; known: {sorted(ANALYSES)}")
-        out.append((name, dict(opts)))
-    return out
+    """Normalise a case's ``analysis:`` list (:func:`orchestrator.analysis_specs.parse_specs`
+    against :data:`ANALYSES`)."""
+    return _parse_specs(specs, known=ANALYSES)
 
 
 def run_analyses(frames, specs, out_dir, plots: bool = True, raise_errors: bool = False) -> dict:
