@@ -94,8 +94,12 @@ def load_table() -> dict:
     user table."""
     table = _package_table()
     user = user_table_path()
-    if user.is_file():
-        for eng, scenes in json.loads(user.read_text()).items():
+    try:
+        user_text = user.read_text() if user.is_file() else None
+    except OSError:            # another user's table (HOME kept under sudo/su): not ours to read
+        user_text = None
+    if user_text:
+        for eng, scenes in json.loads(user_text).items():
             table.setdefault(eng, {}).update(scenes)
     return {eng: {sc: Throughput(**d) for sc, d in scenes.items() if not sc.startswith("_")}
             for eng, scenes in table.items() if not eng.startswith("_")}

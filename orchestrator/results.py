@@ -107,7 +107,8 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
         rows.append(KeyResult("μ_macro (steady)", s.get("mu_mean", np.nan), "", s.get("mu_std"),
                               f"std over {n} samples of the steady window", "not quoted (particle μ = 0.58, §3.2)"))
     lab = _label(asum, "shearband")
-    x50 = (params.get("scene") or {}).get("x50") or _x50(case)
+    sc = params.get("scene") or {}
+    x50 = sc.get("x50") or (sc.get("psd") or {}).get("median") or _x50(case)
     if lab:
         st = _table(adir, lab, "steady")
         if st is not None and len(st):
@@ -120,7 +121,8 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
                 ze = float(np.hypot(ze, np.std(z, ddof=1) / np.sqrt(len(z))))
                 we = float(np.hypot(we, np.std(w, ddof=1) / np.sqrt(len(w))))
             meaning = f"fit error and spread over {len(st)} radii"
-            rows.append(KeyResult("band position z_sb above the lower vane tips", float(np.mean(z)) * 1e6, "µm",
+            rows.append(KeyResult("band position z_sb (cell frame: lower plate face at z = 0 before compression)",
+                                  float(np.mean(z)) * 1e6, "µm",
                                   float(ze) * 1e6, meaning, "just above the lower vanes, in the dilation zone z ≤ 200 µm"))
             rows.append(KeyResult("band width w_sb", float(np.mean(w)) * 1e6, "µm", float(we) * 1e6, meaning,
                                   f"≈ 8 x50 = {8 * x50 * 1e6:.0f} µm" if x50 else "≈ 8 x50"))
@@ -136,8 +138,8 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
         for k, v in d.items():
             if isinstance(v, dict) and v.get("relative_error") is not None:
                 e = float(v["relative_error"])
-                rows.append(KeyResult(f"compression: {k.replace('_', ' ')} vs target", e * 100, "%", None, "",
-                                      "", ok=abs(e) <= 0.02))
+                rows.append(KeyResult(f"servo force vs target at the end of {k.replace('_', ' ')} (|e| ≤ 2 %)",
+                                      float(f"{e * 100:.2g}"), "%", None, "", "", ok=abs(e) <= 0.02))
     return rows
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 import subprocess
 
 import numpy as np
@@ -137,7 +138,7 @@ def test_a_case_naming_no_engines_runs_where_a_deck_exists():
     """Default engines: every installed engine with a deck for the scene (LAMMPS has no shear-cell
     or triaxial deck); engines a case names are kept."""
     from orchestrator.case import load_case
-    from conftest import CASES
+    CASES = Path(__file__).resolve().parents[1] / "cases"
     assert load_case(CASES / "shear_cell_smoke.yaml").engines == ["liggghts", "yade"]
     assert "lammps" in load_case(CASES / "plane_shear_smoke.yaml").engines
     assert load_case(CASES / "triaxial_smoke.yaml", overrides={"engines": ["lammps"]}).engines == ["lammps"]

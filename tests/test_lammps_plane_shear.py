@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from orchestrator.frames import Frames
 from orchestrator.runner import run_case
 from orchestrator.scenes.plane_shear import steady_mu
 
-from conftest import CASES
+CASES = Path(__file__).resolve().parents[1] / "cases"
 
 pytestmark = pytest.mark.engine
 
