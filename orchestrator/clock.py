@@ -31,7 +31,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 from scipy.optimize import nnls
+
+from .atomic import write_text
 
 from .resources import data_file
 
@@ -139,7 +142,6 @@ def _sample(run_dir: Path) -> RunSample | None:
     kind = s.get("scene") or ""
     if not kind:
         try:
-            import yaml
             kind = (yaml.safe_load((run_dir / "case.yaml").read_text()).get("scene") or {}).get("kind", "")
         except (OSError, ValueError, AttributeError):
             kind = ""
@@ -207,7 +209,5 @@ def refresh(paths, out: Path | None = None) -> dict:
     for eng, scenes in fitted.items():
         old.setdefault(eng, {}).update({sc: asdict(tp) for sc, tp in scenes.items()})
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".partial")
-    tmp.write_text(json.dumps(old, indent=1, sort_keys=True) + "\n")
-    os.replace(tmp, out)
+    write_text(out, json.dumps(old, indent=1, sort_keys=True) + "\n")     # atomic, keeps the umask
     return fitted

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 
 __all__ = ["KeyResult", "key_results", "format_measure", "results_frame"]
 
@@ -174,7 +175,6 @@ def key_results(run_dir) -> list[KeyResult]:
     asum = _read_json(adir / "analysis_summary.json") or {}
     case = {}
     try:
-        import yaml
         case = yaml.safe_load((run_dir / "case.yaml").read_text()) or {}
     except (OSError, ValueError):
         pass

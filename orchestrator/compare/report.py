@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..results import key_results
+
 __all__ = ["fig_to_data_uri", "write_run_report", "write_compare_report", "run_checks", "DEFAULT_ANALYSES"]
 
 #: analyses run by ``orchestrator report`` when neither the case nor the command line names any
@@ -217,7 +219,6 @@ def _stability_rows(stab: dict) -> list[dict]:
 
 def _results_html(run_dir) -> str:
     """The run's key figures (orchestrator.results) with the seed paper's value beside each."""
-    from ..results import key_results
     rows = key_results(run_dir)
     if not rows:
         return ""
