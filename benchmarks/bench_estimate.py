@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     table = load_table()
     print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'w':>2s} {'actual s':>9s} "
           f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s}  run")
-    worst = 0.0
+    worst = None
     for s in samples:
         est, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, s.steps, s.ranks, table=table)
         others = [o for o in samples if (o.engine, o.scene) == (s.engine, s.scene) and o.source != s.source]
@@ -52,10 +52,11 @@ def main(argv=None) -> int:
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
         if r2 == r2:
-            worst = max(worst, abs(r2 - 1))
+            worst = max(worst or 0.0, abs(r2 - 1))
         print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {s.ranks:2d} {s.engine_s:9.1f} "
               f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f}  {Path(s.source).name}")
-    print(f"largest leave-one-out error: {100 * worst:.0f} % (floor: 30 %)")
+    print("largest leave-one-out error: " + (f"{100 * worst:.0f} % (floor: 30 %)" if worst is not None
+          else "n/a (no run has another of its engine and scene to be predicted from)"))
     return 0
 
 

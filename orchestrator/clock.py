@@ -167,11 +167,14 @@ def fit(samples: list[RunSample]) -> Throughput:
     """Fit one engine+scene's cost model to its runs (see the module docstring)."""
     if not samples:
         raise ValueError("no runs to fit")
-    single = [s for s in samples if s.ranks == 1] or samples
-    startup = float(np.median([max(s.engine_s - s.loop_s, 0.0) for s in single]))
-    # loop time per step, normalised to one rank with the efficiency fitted below (first pass: 1 rank only)
-    ns = np.array([s.n_particles for s in single], float)
-    tps = np.array([s.loop_s / s.steps for s in single])
+    single = [s for s in samples if s.ranks == 1]
+    # without a one-rank run the multi-rank runs stand in, scaled to one rank with the assumed
+    # efficiency (they cannot measure the efficiency against themselves)
+    base = single or samples
+    scale = [1.0 if s.ranks == 1 else 1 + ASSUMED_PARALLEL_EFFICIENCY * (s.ranks - 1) for s in base]
+    startup = float(np.median([max(s.engine_s - s.loop_s, 0.0) for s in base]))
+    ns = np.array([s.n_particles for s in base], float)
+    tps = np.array([s.loop_s * k / s.steps for s, k in zip(base, scale)])
     sizes = len(set(ns.tolist()))
     if sizes >= 2:
         A = np.column_stack([np.ones_like(ns), ns])
@@ -182,7 +185,7 @@ def fit(samples: list[RunSample]) -> Throughput:
         note = "one size: per-step overhead not separated"
     eff = ASSUMED_PARALLEL_EFFICIENCY
     multi = [s for s in samples if s.ranks > 1]
-    if multi:
+    if multi and single:
         effs = []
         for s in multi:
             t1 = s.steps * (a + b * s.n_particles)
@@ -191,7 +194,7 @@ def fit(samples: list[RunSample]) -> Throughput:
         eff = float(np.clip(np.median(effs), 0.05, 1.0))
         note += f"; parallel efficiency from {len(multi)} run(s)"
     else:
-        note += "; parallel efficiency assumed"
+        note += "; parallel efficiency assumed" + ("" if single else " (no one-rank run)")
     return Throughput(startup, float(a), float(b), eff, len(samples), note)
 
 

@@ -64,3 +64,10 @@ def test_refresh_from_run_directories(tmp_path, monkeypatch):
     assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-6) and tp.per_step_s == pytest.approx(0, abs=1e-12)
     assert tp.startup_s == pytest.approx(1.0)
     assert load_table()["liggghts"]["plane_shear"] == tp
+
+
+def test_multi_rank_runs_alone_keep_the_assumed_efficiency():
+    from orchestrator.clock import ASSUMED_PARALLEL_EFFICIENCY
+    tp = fit(_runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=ASSUMED_PARALLEL_EFFICIENCY))
+    assert tp.parallel_efficiency == ASSUMED_PARALLEL_EFFICIENCY and "no one-rank run" in tp.note
+    assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-9)       # scaled back to one rank
