@@ -504,7 +504,6 @@ class TriaxialParams(ScenePart):
     by :func:`prepare`, which packs the grains."""
     n: int                    #: grains [-]
     ids: tuple                #: their ids 1..n
-    diameters: tuple | None   #: sampled volume-equivalent diameters [m] (dropped once packed)
     n_spheres: int | None     #: clumps: member spheres the engines integrate [-]
     diameter: float           #: sample diameter [m]
     height: float             #: sample height [m]
@@ -527,6 +526,7 @@ class TriaxialParams(ScenePart):
     skin: float               #: neighbour skin [m]
     series_columns: tuple     #: columns of triax.txt
     servo_every: int          #: steps between servo updates [-]
+    diameters: tuple | None = opt("sampled volume-equivalent diameters [m] (dropped once packed)")
     radius0: float | None = opt("packed sample radius [m]")
     z_bottom0: float | None = opt("packed sample's lowest point [m]")
     z_top0: float | None = opt("packed sample's highest point [m]")
