@@ -518,7 +518,7 @@ class TriaxialParams(ScenePart):
     strain_rate: float        #: loading strain rate [1/s]
     inertial_number: float    #: loading inertial number [-]
     shear_steps: int          #: steps of the loading stage [-]
-    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s]
+    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s], drag_ramp_steps (linear ramp of the drag to zero, whole chunks; 0: off at once), drag_ramp_time [s]
     dump_every: int           #: steps between frames [-]
     series_every: int         #: steps between series rows [-]
     steps: int                #: steps of both stages [-]
