@@ -51,8 +51,6 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
-from scipy.optimize import brentq
-from scipy.spatial import ConvexHull, cKDTree
 
 from ..atomic import write_json, write_text
 from ..case import Strict, positive
@@ -62,6 +60,24 @@ from ..numerics import running_mean
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
+
+
+# scipy.optimize and scipy.spatial are imported on first use: every case load imports this scene,
+# and they cost ~0.6 s (validate within 2 s, #16)
+def brentq(*args, **kwargs):
+    from scipy.optimize import brentq as f
+    return f(*args, **kwargs)
+
+
+def ConvexHull(*args, **kwargs):  # noqa: N802 - scipy's name
+    from scipy.spatial import ConvexHull as f
+    return f(*args, **kwargs)
+
+
+def cKDTree(*args, **kwargs):  # noqa: N802 - scipy's name
+    from scipy.spatial import cKDTree as f
+    return f(*args, **kwargs)
+
 
 #: per-frame controls written to frames.h5 (see module docstring)
 CONTROLS: dict[str, str] = {
