@@ -211,6 +211,7 @@ class Engine(ABC):
                     if not events:
                         if proc.poll() is not None:
                             break
+                        bar.update(step)            # a quiet engine (setup, a long stage) still gets its lines
                         continue
                     chunk = os.read(proc.stdout.fileno(), 65536)
                     if not chunk:
@@ -294,8 +295,9 @@ class _Progress:
     """A rich progress bar with ETA, fed with the engine's step counter; not on a terminal (a log,
     a batch job), one line on stderr every :attr:`EVERY` seconds instead."""
 
-    #: seconds between two progress lines when stderr is not a terminal
-    EVERY = 30.0
+    #: seconds between two progress lines when stderr is not a terminal (ORCHESTRATOR_PROGRESS_EVERY
+    #: overrides it, e.g. for a test or a batch system that wants fewer lines)
+    EVERY = float(os.environ.get("ORCHESTRATOR_PROGRESS_EVERY", "30"))
 
     def __init__(self, label: str, total: int, enabled: bool = True):
         import sys
@@ -308,6 +310,8 @@ class _Progress:
         self.next = self.t0 + self.EVERY
         if not sys.stderr.isatty():
             self.lines = True
+            print(f"{label}: started, {total} steps; a progress line every {self.EVERY:.0f} s", file=sys.stderr,
+                  flush=True)
             return
         try:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
@@ -325,11 +329,11 @@ class _Progress:
         elif self.lines:
             import sys
             now = time.perf_counter()
-            if self.first is None:
+            if self.first is None and step > 0:   # the first report (a resumed run starts late)
                 self.first = (now, step)
             if now >= self.next:
                 self.next = now + self.EVERY
-                t, s0 = self.first
+                t, s0 = self.first or (now, step)
                 rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
                 eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
                 print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "

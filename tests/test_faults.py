@@ -320,3 +320,47 @@ def test_same_case_started_three_times_at_once(tmp_path, engines_installed):
     assert sum("reused" in o for o, _, _ in outs) == 2, [o for o, _, _ in outs]
     (run,) = runs.glob("*/liggghts-*")
     assert json.loads((run / "summary.json").read_text())["status"] == "complete"
+
+
+@pytest.mark.engine
+def test_progress_reaches_a_redirected_log_while_the_engine_runs(tmp_path, engines_installed):
+    """`orchestrator run case > log 2>&1`: the start line (sizing) and progress lines are in the log
+    while the engine still runs (issue #16 item 6; stdout was block-buffered off a terminal, so the
+    start line only arrived at exit). The 30 s period is shortened to 2 s for the test."""
+    log = tmp_path / "run.log"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", str(SMOKE), "--engine", "liggghts",
+                                 "--runs", str(tmp_path / "runs"), "--no-report"], stdout=fh, stderr=subprocess.STDOUT,
+                                env=dict(os.environ, ORCHESTRATOR_PROGRESS_EVERY="2"), start_new_session=True)
+    try:
+        seen, t0 = "", time.time()
+        while time.time() - t0 < 600 and proc.poll() is None:
+            seen = log.read_text()
+            if "particles" in seen and " step " in seen and "%" in seen:
+                break
+            time.sleep(0.5)
+        alive = proc.poll() is None
+    finally:
+        proc.wait(timeout=900)
+    assert alive, f"the run ended before its log showed a start and a progress line:\n{seen}"
+    assert "shear_cell_smoke: 228 particles" in seen, seen          # the start line, with the sizing
+    assert "liggghts shear_cell_smoke: step " in seen, seen          # a progress line
+
+
+def test_remembered_integrations_equal_a_fresh_computation():
+    """The package's table of remembered integrations (orchestrator/_data/contact_law_memo.json,
+    benchmarks/bench_validate.py --memo) holds exactly what the functions compute today: a change
+    to their numerics without a new MEMO_VERSION fails here."""
+    import importlib
+    import inspect
+    from orchestrator import contact_law
+    table = json.loads(contact_law.PACKAGE_MEMO.read_text())
+    mine = {k: v for k, v in table.items() if k.startswith(contact_law._memo_prefix())}
+    assert mine, "no entries for this scipy: regenerate with benchmarks/bench_validate.py --memo"
+    for key, value in mine.items():
+        call = key[len(contact_law._memo_prefix()):]
+        qual, args = call.split("(", 1)
+        module, name = qual.rsplit(".", 1)
+        fn = inspect.unwrap(getattr(importlib.import_module(module), name))
+        got = float(fn(*[float(x) for x in args.rstrip(")").split(", ")]))
+        assert got == value, f"{call}: table {value!r}, computed {got!r}"
