@@ -55,6 +55,7 @@ from pydantic import Field, field_validator, model_validator
 from ..atomic import write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
+from ..contact_law import remembered
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..particles_io import read_particle_table, write_particle_table
@@ -159,6 +160,7 @@ def _truncated_mean(mu, s, lo, hi, m=4000):
     return float(np.sum(w * np.exp(x)) / np.sum(w))
 
 
+@remembered          # a root search (and scipy.optimize's import) per call: kept across processes
 def _lognormal_mu(lo, hi, mean, s):
     return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
 
