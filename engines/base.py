@@ -298,6 +298,10 @@ class _Progress:
     #: seconds between two progress lines when stderr is not a terminal (ORCHESTRATOR_PROGRESS_EVERY
     #: overrides it, e.g. for a test or a batch system that wants fewer lines)
     EVERY = float(os.environ.get("ORCHESTRATOR_PROGRESS_EVERY", "30"))
+    #: the ETA extrapolates the rate of the last this many seconds: a run's step rate changes
+    #: between stages (a loose packing runs fast, a sheared dense one slowly) and with the load
+    #: of the machine, so the mean rate since the start under-estimates the rest
+    RATE_WINDOW = 120.0
 
     def __init__(self, label: str, total: int, enabled: bool = True):
         import sys
@@ -307,6 +311,7 @@ class _Progress:
             return
         self.label, self.total, self.t0 = label, total, time.perf_counter()
         self.first = None                        # (time, step) of the first report: a resumed run starts late
+        self.samples = []                        # (time, step) of the last reports, for the ETA
         self.next = self.t0 + self.EVERY
         if not sys.stderr.isatty():
             self.lines = True
@@ -331,9 +336,14 @@ class _Progress:
             now = time.perf_counter()
             if self.first is None and step > 0:   # the first report (a resumed run starts late)
                 self.first = (now, step)
+                self.samples.append(self.first)
             if now >= self.next:
                 self.next = now + self.EVERY
-                t, s0 = self.first or (now, step)
+                if self.samples:
+                    self.samples.append((now, step))
+                    while len(self.samples) > 2 and now - self.samples[1][0] >= self.RATE_WINDOW:
+                        self.samples.pop(0)
+                t, s0 = self.samples[0] if self.samples else (now, step)
                 rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
                 eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
                 print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "
