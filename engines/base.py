@@ -102,6 +102,12 @@ class Engine(ABC):
     throughput: float = 1e6
     #: process start-up and set-up [s] (tiny verification cases: engine time minus loop time)
     startup: float = 1.0
+    #: memory per particle [bytes] and fixed process overhead [bytes] (orders of magnitude, the
+    #: engine's own data structures; orchestrator.sizing)
+    bytes_per_particle: float = 5_000
+    base_bytes: float = 300e6
+    #: copies of all frames the parse holds in memory at once (frames x particles x columns doubles)
+    parse_copies: int = 1
 
     def workers(self, case) -> int:
         """Parallel workers a run of ``case`` uses (threads by default)."""
@@ -129,6 +135,26 @@ class Engine(ABC):
     @abstractmethod
     def _probe_version(self) -> str:
         """Run the engine to read its version string."""
+
+    # -- numbers -----------------------------------------------------------------------------
+    def engine_params(self, case, params):
+        """This engine's own numbers, derived from the shared parameters
+        (:class:`orchestrator.params.Params`): a frozen dataclass the templates receive as
+        ``engine`` (in ``engines/<name>/numbers.py``), None when the engine needs none. Raises
+        :class:`orchestrator.contact_law.DerivationError` for a case its decks cannot realise
+        (called for every engine a case names when the case is validated)."""
+        return None
+
+    def seed_term_ratios(self, case, params, overlaps) -> list[tuple[str, str, list[float]]]:
+        """How this engine's decks realise seed 000's contact terms for one median pair
+        (r_eff = x50/4), as (term, mechanism, [ratio to the seed's value at each overlap [m] of
+        ``overlaps``]) (orchestrator.compare.ladder's single-contact table); empty: exactly."""
+        return []
+
+    def required_features(self, case, params) -> list[str]:
+        """The features this engine must offer for the case: the scene's (``params.features``),
+        plus any its own numbers add (e.g. a restitution below what its law can be fed)."""
+        return list(params.features)
 
     # -- capabilities ----------------------------------------------------------------------
     def check(self, features: list[str], accepted: dict[str, str]) -> list[Substitution]:
