@@ -32,7 +32,7 @@ from ..lammps_dump import per_atom_arrays, read_binary_dump, truncate_binary_dum
 from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
 from ..liggghts.segments import dump_segments
 from ..render import render_template
-from .numbers import lammps_numbers
+from .numbers import lammps_numbers, shear_cell_law, shear_cell_regions
 
 #: frames.h5 fields the LAMMPS decks dump (no stress yet: refused in render)
 FRAME_FIELDS = ("position", "velocity", "angular_velocity", "force", "torque")
@@ -64,8 +64,24 @@ class Lammps(Engine):
         "plane_wall": "fix wall/gran granular ... zplane",
         "periodic": "boundary p",
         "rolling_friction": "rolling sds: k_r = k_t (torque k_t R*^2 per radian), limit mu_r R* F_ncrit (plane shear)",
+        "adhesion": "dmt: F = 4/3 E* sqrt(R*) d^3/2 - 4 pi gamma R*, gamma = F_adh/(4 pi <r_eff>): the seed's "
+                    "F_adh r_eff/<r_eff> for every pair",
+        "rotating_walls": "region ... rotate v_theta with fix wall/gran/region (wall velocity from the region's motion)",
+        "servo_wall": "region ... move NULL NULL v_dz: the piston's z is a marker atom moved by fix move with the "
+                      "equal-style servo velocity (kept in restart files)",
     }
     substitutes = {
+        "seed000_damping": {
+            "viscoelastic_median_pair": "damping viscoelastic with eta_n0 = gamma_n/(m* sqrt(R*)) of the median pair: "
+                                        "the seed's gamma_n sqrt(xi) xi_dot for that pair, sqrt(m* R*/(m*50 R*50)) "
+                                        "times it for others (docs/lammps.md)",
+            "tsuji_restitution": "damping coeff_restitution with the e_n the seed's gamma_n delivers at the scene's "
+                                 "characteristic speed (as LIGGGHTS and YADE)",
+        },
+        "mesh_walls": {
+            "region_walls": "fix wall/gran/region on block, cylinder and plane regions: the shear cell's vanes are the "
+                            "STL's boxes, its plates, flanges and sidewall true circles for the STL's polygons",
+        },
         "rolling_friction_load": {
             "sds_constant": "rolling sds with a constant mu_r = sqrt(2 r_eff xi)/r_eff at the expected overlap "
                             "(the seed's lever arm sqrt(2 r_eff xi) grows with the load)",
@@ -114,8 +130,12 @@ class Lammps(Engine):
         if not data.exists():
             write_data_file(data, run_dir / "particles.txt", sc["box_lo"], sc["box_hi"])
         cols = dump_columns(case)
+        lmp = lammps_numbers(params, case)
+        if case.scene.kind == "shear_cell":
+            lmp["shear_cell"] = shear_cell_law(params, case, self._damping_choice(case, params))
+            lmp["regions"] = shear_cell_regions(params, case)
         ctx = {
-            "case": case, "p": params, "lmp": lammps_numbers(params, case), "resume": resume,
+            "case": case, "p": params, "lmp": lmp, "resume": resume,
             "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
             "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
             "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
@@ -126,6 +146,15 @@ class Lammps(Engine):
         deck = run_dir / ("resume.in" if resume else "deck.in")
         render_template(f"lammps/{case.scene.kind}.in.j2", ctx, deck)
         return deck
+
+    def _damping_choice(self, case, params) -> str:
+        """The mechanism of seed 000's damping in this case: the substitute the case accepts for
+        ``seed000_damping`` (``viscoelastic_median_pair`` or ``tsuji_restitution``), or
+        ``restitution`` when the case asks for a restitution coefficient."""
+        for s in self.check(params["features"], case.contact.substitutes):
+            if s.feature == "seed000_damping":
+                return s.mechanism
+        return "restitution"
 
     def command(self, deck: Path, case) -> list[str]:
         # -nonbuf: unbuffered screen output, so a failure's ERROR line reaches the log;
