@@ -139,3 +139,51 @@ def test_smoke_upper_piston_turned_by_the_commanded_angle(smoke):
     with h5py.File(out.run_dir / "frames.h5") as h:
         assert h["walls/rotating/angle"][-1] <= end["angle"] + 1e-12
         assert h["walls/lower_piston/position"][-1, 2] == pytest.approx(end["z_lower"], rel=0.01)
+
+
+@pytest.mark.engine
+def test_smoke_killed_run_resumes_from_its_restart_file(smoke, tmp_path):
+    """A run killed (SIGKILL of the orchestrator and LAMMPS) after its second restart file resumes
+    from it: the servo's state is the marker atom's z in the restart file. Every frame once at
+    the same steps, the wall series at the same steps, the frames up to the restart step identical
+    to the uninterrupted run's."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from orchestrator.frames import Frames
+    case, ref_out = smoke
+    runs = tmp_path / "runs"
+    cmd = [sys.executable, "-m", "orchestrator", "run", str(SMOKE), "--engine", "lammps", "--runs", str(runs),
+           "--quiet", "--no-report"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while time.time() - t0 < 600:
+        found = list(runs.glob("shear_cell_smoke/lammps-*/restart/state.*.restart"))
+        if len(found) >= 2:
+            break
+        assert proc.poll() is None, "the run ended before it could be killed"
+        time.sleep(0.2)
+    else:
+        raise AssertionError("no second restart file")
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=60)
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    run_dir = found[0].parents[1]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "complete" and summary["resumed_from"], summary.get("resumed_from")
+    s_resume = int(summary["resumed_from"]["step"])
+    ref, got = Frames(ref_out.run_dir), Frames(run_dir)
+    assert list(got.step) == list(ref.step)
+    for name in ref.wall_names:
+        assert np.array_equal(got.wall(name)["time"], ref.wall(name)["time"]), name
+    before = np.asarray(got.step) <= s_resume
+    assert before.any()
+    np.testing.assert_array_equal(got.position[before], ref.position[before])
+    after = ~before
+    r_min = float(ref.radius.min())
+    dev = float(np.abs(got.position[after] - ref.position[after]).max()) / r_min if after.any() else 0.0
+    print(f"resumed from step {s_resume}: largest position difference after it {dev:.3g} r_min")
