@@ -64,8 +64,10 @@ def test_geometry_difference_from_the_stl():
     """The vanes are the STL's boxes (same volume and swept annulus); plates, flanges and sidewall are
     circles where the STL has n-gons: the STL encloses 1 - n/(2 pi) sin(2 pi/n) less (0.13 % at n = 72)."""
     from engines.lammps.numbers import polygon_area_deficit, shear_cell_geometry_difference
+    from orchestrator.scenes.shear_cell import build_meshes
     case = load_case(CASES / "shear_cell_small.yaml")
-    d = shear_cell_geometry_difference(case, derive(case))
+    params = derive(case)
+    d = shear_cell_geometry_difference(case, params, build_meshes(case, params))
     assert d["vane_volume"] == pytest.approx(1.0, abs=1e-9)
     assert d["vane_swept_volume"] == pytest.approx(1.0, abs=1e-9)
     for k in ("sidewall_volume", "plate_volume", "pocket_area"):

@@ -23,6 +23,7 @@ import numpy as np
 
 from orchestrator.atomic import write_json
 from orchestrator.frames import FrameWriter
+from orchestrator.params import freeze
 from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
@@ -56,6 +57,11 @@ class Lammps(Engine):
     #: both engines' loop times in one session: 7.13e5 / 6.98e5 particle-steps/s = 1.02; docs/lammps.md)
     throughput = 6e6
     startup = 0.5           # measured 1.03 s against LIGGGHTS' 1.22 s in the same session (LIGGGHTS: 0.5)
+    # the same atom, neighbour-list and history layout as LIGGGHTS; measured peak RSS of a one-atom
+    # run 31 MB against LIGGGHTS' 30 MB (same session); the parse stacks every frame once more
+    bytes_per_particle = 2_000
+    base_bytes = 50e6
+    parse_copies = 2
     capabilities = {
         "hertz": "pair_style granular hertz/material (E* = E/(2(1-nu^2)))",
         "restitution_damping": "damping coeff_restitution (Tsuji form) with limit_damping (clipped, as LIGGGHTS)",
@@ -115,6 +121,17 @@ class Lammps(Engine):
         m = re.search(r"Simulator - ([^\n]+)", out)
         return "LAMMPS " + m.group(1).strip() if m else (out.splitlines()[0] if out else "unknown")
 
+    # -- numbers ----------------------------------------------------------------------------
+    def engine_params(self, case, params):
+        """:func:`engines.lammps.numbers.lammps_numbers`, and for the shear cell its contact law
+        (:func:`~engines.lammps.numbers.shear_cell_law`) and wall regions
+        (:func:`~engines.lammps.numbers.shear_cell_regions`), frozen."""
+        out = lammps_numbers(params, case)
+        if case.scene.kind == "shear_cell":
+            out["shear_cell"] = shear_cell_law(params, case, self._damping_choice(case, params))
+            out["regions"] = shear_cell_regions(params, case)
+        return freeze(out)
+
     # -- render -----------------------------------------------------------------------------
     def render(self, case, params, run_dir: Path, resume=None) -> Path:
         run_dir = Path(run_dir)
@@ -130,12 +147,9 @@ class Lammps(Engine):
         if not data.exists():
             write_data_file(data, run_dir / "particles.txt", sc["box_lo"], sc["box_hi"])
         cols = dump_columns(case)
-        lmp = lammps_numbers(params, case)
-        if case.scene.kind == "shear_cell":
-            lmp["shear_cell"] = shear_cell_law(params, case, self._damping_choice(case, params))
-            lmp["regions"] = shear_cell_regions(params, case)
+        lmp = self.engine_params(case, params)
         ctx = {
-            "case": case, "p": params, "lmp": lmp, "resume": resume,
+            "case": case, "p": params, "engine": lmp, "lmp": lmp, "resume": resume,
             "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
             "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
             "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
@@ -151,10 +165,12 @@ class Lammps(Engine):
         """The mechanism of seed 000's damping in this case: the substitute the case accepts for
         ``seed000_damping`` (``viscoelastic_median_pair`` or ``tsuji_restitution``), or
         ``restitution`` when the case asks for a restitution coefficient."""
-        for s in self.check(params["features"], case.contact.substitutes):
-            if s.feature == "seed000_damping":
-                return s.mechanism
-        return "restitution"
+        if "seed000_damping" not in params["features"]:
+            return "restitution"
+        subs = case.contact.substitutes
+        choice = subs.get(f"{self.name}.seed000_damping", subs.get("seed000_damping"))
+        # a choice LAMMPS does not offer is refused by check() before the deck is rendered
+        return choice if choice in self.substitutes["seed000_damping"] else "tsuji_restitution"
 
     def command(self, deck: Path, case) -> list[str]:
         # -nonbuf: unbuffered screen output, so a failure's ERROR line reaches the log;
