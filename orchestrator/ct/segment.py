@@ -218,7 +218,11 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
 
     sigma : Gaussian filter standard deviation [voxels] (0 = none).
     threshold : grey-level threshold; None = IsoData on the filtered image.
-    h : minimum height [m] of a distance-map maximum to seed a grain (default 1 voxel).
+    h : minimum height [m] of a distance-map maximum to seed a grain. Default: 1 voxel, or 0.15 x
+        the typical peak (upper quartile of the basins' peaks) when that is lower, i.e. for grains
+        under ~13 voxels across: two touching 8-voxel grains have a saddle less than 1 voxel below
+        their peaks at a sharp PSF and were merged (7 of 918 pairs, the contact recall 0.972 of
+        docs/ct.md); 0.15 x peak keeps them apart and changes nothing for larger grains.
     marker_level : markers are the h-maxima of the distance map of the solid thresholded at this
         fraction between the pore and solid grey levels (0.7: tighter than IsoData, so the bridges that
         blur creates between touching grains do not join their markers); None = same map as the
@@ -237,7 +241,7 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
 
     vs = scan.voxel_size
     v3 = vs ** 3
-    h_vox = 1.0 if h is None else h / vs
+    h_vox = None if h is None else h / vs           # None: scale-aware default, see _merge_shallow_basins
     max_pore = 1000 if max_pore_volume is None else max_pore_volume / v3
     min_vox = 30 if min_volume is None else min_volume / v3
     timings = {}
@@ -302,6 +306,8 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
         t0 = tick("markers", t0)
         basins = watershed(-dist, peaks, mask=binary, compactness=compactness)
         t0 = tick("watershed", t0)
+        if h_vox is None:
+            h_vox = default_h(mdist, peaks, npk)
         labels = _merge_shallow_basins(basins, mdist, h_vox, peaks)
         del basins, mdist, peaks
         t0 = tick("merge", t0)
@@ -412,6 +418,17 @@ def face_pairs(labels, connectivity=1):
         face = abs(dz) + abs(dy) + abs(dx) == 1
         ax_.append(np.full(len(i), int(np.argmax((dz, dy, dx))) if face else -1, np.int8))
     return tuple(np.concatenate(v) for v in (la, lb, ia, ib, ax_))
+
+
+def default_h(height, seeds, n) -> float:
+    """The default merge height [voxels] of :func:`segment`: 1 voxel, or 0.15 x the upper quartile
+    of the regional maxima's peaks of ``height`` (seeds labelled 1..n) when that is lower."""
+    if n == 0:
+        return 1.0
+    at = np.flatnonzero(seeds)
+    peak = np.zeros(n + 1, np.float64)
+    np.maximum.at(peak, seeds.ravel()[at], height.ravel()[at])
+    return float(min(1.0, 0.15 * np.percentile(peak[1:], 75)))
 
 
 def _merge_shallow_basins(basins, height, h, seeds):
