@@ -345,3 +345,29 @@ def basin_saddles(basins, height):
                             m += 1
                             last = k
     return keys[:m], sad[:m], n1
+
+
+@numba.njit(cache=True, nogil=True)
+def label_sizes(lab, n):
+    """Voxel count of each label 0..n (np.bincount without its int64 copy of the volume)."""
+    out = np.zeros(n + 1, np.int64)
+    flat = lab.ravel()
+    for i in range(flat.size):
+        out[flat[i]] += 1
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def table_mask(lab, table, base):
+    """Boolean volume ``table[lab]``, or-ed with ``base`` when ``base`` has the volume's size."""
+    out = np.empty(lab.shape, np.bool_)
+    fo = out.ravel()
+    fl = lab.ravel()
+    if base.size == lab.size:
+        fb = base.ravel()
+        for i in range(fl.size):
+            fo[i] = fb[i] or table[fl[i]]
+    else:
+        for i in range(fl.size):
+            fo[i] = table[fl[i]]
+    return out

@@ -238,6 +238,7 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
     """
     from skimage.filters import threshold_isodata
     from skimage.segmentation import watershed
+    from ._kernels import label_sizes, table_mask
 
     vs = scan.voxel_size
     v3 = vs ** 3
@@ -287,10 +288,10 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
         t0 = tick("threshold", t0)
         binary = _fill_small_pores(binary, max_pore)
         lab0, n0 = ndimage.label(binary)
-        size = np.bincount(lab0.ravel())
+        size = label_sizes(lab0, n0)
         keep = size >= min_vox
         keep[0] = False
-        binary = keep[lab0]
+        binary = table_mask(lab0, keep, np.empty(0, np.bool_))
         del lab0
         t0 = tick("pores", t0)
         dist = distance_map(binary)
@@ -327,10 +328,11 @@ def _fill_small_pores(binary, max_voxels):
     """Fill enclosed pores (background components, 6-connected, not touching the volume border) of
     at most ``max_voxels`` voxels. One labelling of the background (the same holes as
     :func:`scipy.ndimage.binary_fill_holes`, without its iterated dilation from the border)."""
+    from ._kernels import label_sizes, table_mask
     lab, n = ndimage.label(~binary)
     if n == 0:
         return binary
-    size = np.bincount(lab.ravel(), minlength=n + 1)
+    size = label_sizes(lab, n)
     fill = size <= max_voxels
     fill[0] = False
     for ax in range(3):
@@ -338,7 +340,7 @@ def _fill_small_pores(binary, max_voxels):
             fill[np.take(lab, end, axis=ax)] = False
     if not fill.any():
         return binary
-    return binary | fill[lab]
+    return table_mask(lab, fill, np.ascontiguousarray(binary))
 
 
 def distance_map(binary) -> np.ndarray:

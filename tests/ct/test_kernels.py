@@ -103,3 +103,14 @@ def test_basin_saddles_equal_the_face_pair_reduction():
                        np.minimum(h.ravel()[ia], h.ravel()[ib]).tolist()):
         want[a * base + b] = max(want.get(a * base + b, -1.0), s)
     assert got == want and len(got) > 20
+
+
+def test_label_sizes_and_table_mask():
+    from orchestrator.ct._kernels import label_sizes, table_mask
+    lab = _labels()
+    n = int(lab.max())
+    assert np.array_equal(label_sizes(lab, n), np.bincount(lab.ravel(), minlength=n + 1))
+    table = np.random.default_rng(0).random(n + 1) < 0.5
+    base = np.random.default_rng(1).random(lab.shape) < 0.2
+    assert np.array_equal(table_mask(lab, table, base), base | table[lab])
+    assert np.array_equal(table_mask(lab, table, np.empty(0, bool)), table[lab])
