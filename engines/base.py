@@ -102,6 +102,12 @@ class Engine(ABC):
     throughput: float = 1e6
     #: process start-up and set-up [s] (tiny verification cases: engine time minus loop time)
     startup: float = 1.0
+    #: memory per particle [bytes] and fixed process overhead [bytes] (orders of magnitude, the
+    #: engine's own data structures; orchestrator.sizing)
+    bytes_per_particle: float = 5_000
+    base_bytes: float = 300e6
+    #: copies of all frames the parse holds in memory at once (frames x particles x columns doubles)
+    parse_copies: int = 1
 
     def workers(self, case) -> int:
         """Parallel workers a run of ``case`` uses (threads by default)."""
@@ -129,6 +135,26 @@ class Engine(ABC):
     @abstractmethod
     def _probe_version(self) -> str:
         """Run the engine to read its version string."""
+
+    # -- numbers -----------------------------------------------------------------------------
+    def engine_params(self, case, params):
+        """This engine's own numbers, derived from the shared parameters
+        (:class:`orchestrator.params.Params`): a frozen dataclass the templates receive as
+        ``engine`` (in ``engines/<name>/numbers.py``), None when the engine needs none. Raises
+        :class:`orchestrator.contact_law.DerivationError` for a case its decks cannot realise
+        (called for every engine a case names when the case is validated)."""
+        return None
+
+    def seed_term_ratios(self, case, params, overlaps) -> list[tuple[str, str, list[float]]]:
+        """How this engine's decks realise seed 000's contact terms for one median pair
+        (r_eff = x50/4), as (term, mechanism, [ratio to the seed's value at each overlap [m] of
+        ``overlaps``]) (orchestrator.compare.ladder's single-contact table); empty: exactly."""
+        return []
+
+    def required_features(self, case, params) -> list[str]:
+        """The features this engine must offer for the case: the scene's (``params.features``),
+        plus any its own numbers add (e.g. a restitution below what its law can be fed)."""
+        return list(params.features)
 
     # -- capabilities ----------------------------------------------------------------------
     def check(self, features: list[str], accepted: dict[str, str]) -> list[Substitution]:
@@ -296,6 +322,10 @@ class _Progress:
 
     #: seconds between two progress lines when stderr is not a terminal
     EVERY = 30.0
+    #: the ETA extrapolates the rate of the last this many seconds: a run's step rate changes
+    #: between stages (a loose packing runs fast, a sheared dense one slowly) and with the load
+    #: of the machine, so the mean rate since the start under-estimates the rest
+    RATE_WINDOW = 120.0
 
     def __init__(self, label: str, total: int, enabled: bool = True):
         import sys
@@ -305,6 +335,7 @@ class _Progress:
             return
         self.label, self.total, self.t0 = label, total, time.perf_counter()
         self.first = None                        # (time, step) of the first report: a resumed run starts late
+        self.samples = []                        # (time, step) of the last reports, for the ETA
         self.next = self.t0 + self.EVERY
         if not sys.stderr.isatty():
             self.lines = True
@@ -327,9 +358,13 @@ class _Progress:
             now = time.perf_counter()
             if self.first is None:
                 self.first = (now, step)
+                self.samples.append(self.first)
             if now >= self.next:
                 self.next = now + self.EVERY
-                t, s0 = self.first
+                self.samples.append((now, step))
+                while len(self.samples) > 2 and now - self.samples[1][0] >= self.RATE_WINDOW:
+                    self.samples.pop(0)
+                t, s0 = self.samples[0]
                 rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
                 eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
                 print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "

@@ -79,7 +79,7 @@ def damping_ratio(e: float) -> float:
 
 
 def tsuji_beta(e: float) -> float:
-    """β = ln e / √(ln² e + π²) (LIGGGHTS and YADE Mindlin)."""
+    """β = ln e / √(ln² e + π²) (Tsuji et al. 1992)."""
     if e >= 1.0:
         return 0.0
     le = math.log(e)
@@ -128,8 +128,9 @@ def _clipped_restitution(force) -> float:
 
 @functools.lru_cache(maxsize=256)
 def restitution_input(e_target: float) -> float:
-    """The restitution to give LIGGGHTS (``coefficientRestitution``) and YADE (Mindlin ``en``)
-    so that a collision delivers ``e_target`` (see module docstring)."""
+    """The restitution to feed a Tsuji law whose tensile force is clipped (engines with
+    ``limitForce``/``limit_damping``) so that a collision delivers ``e_target``; raises
+    DerivationError below what the clipped law can deliver (see orchestrator.derive's docstring)."""
     if e_target >= 1.0:
         return 1.0
     f = lambda e_in: delivered_restitution(round(e_in, 12)) - e_target
@@ -140,11 +141,6 @@ def restitution_input(e_target: float) -> float:
     return float(brentq(f, lo, hi, xtol=1e-10))
 
 
-#: LIGGGHTS' ``coefficientRestitution`` must exceed 0.05 (global_properties.cpp), so ``model
-#: hertz`` delivers at least e_n = 0.214; below that the case must accept a substitute.
-LIGGGHTS_MIN_RESTITUTION_INPUT = 0.05
-
-
 @functools.lru_cache(maxsize=256)
 def _sqrt_damping_restitution(b: float) -> float:
     """e_n of X'' = -5/4 X^1.5 - b √X X' (Hertz with damping ∝ √δ δ̇, clipped; X = δ/δ_max
@@ -153,7 +149,7 @@ def _sqrt_damping_restitution(b: float) -> float:
 
 
 def sqrt_damping_gamma(e_target: float, m_eff: float, R_eff: float, E_eff: float, v: float) -> float:
-    """γ [1/(m s)] of LIGGGHTS ``model hertz/stiffness`` (F_damp = γ m* √(R* δ) δ̇) that delivers
+    """γ [1/(m s)] of a damping force F_damp = γ m* √(R* δ) δ̇ (clipped) that delivers
     ``e_target`` for an impact at normal speed ``v`` [m/s]. With this law e_n varies with speed
     (as the ratio of damping to elastic force grows like v^(1/5)): it is exact only at ``v``."""
     if e_target >= 1.0:

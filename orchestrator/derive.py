@@ -27,8 +27,9 @@ from .contact_law import (  # noqa: F401  (re-exported: scenes and tests import 
     DerivationError, effective_modulus, effective_shear_modulus, reduced,
     hertz_max_overlap, hertz_contact_time, hertz_peak_force, rayleigh_time_step,
     sliding_limit_tangential_restitution, sliding_threshold_angle, damping_ratio, tsuji_beta,
-    delivered_restitution, restitution_input, LIGGGHTS_MIN_RESTITUTION_INPUT, sqrt_damping_gamma)
-from .registry import get_scene
+    delivered_restitution, restitution_input, sqrt_damping_gamma)
+from .params import Material, Params, Restitution, WallMaterial
+from .registry import get_engine, get_scene
 from .stability.checks import check, monitor_limits
 
 
@@ -45,34 +46,6 @@ def adhesion_force(case) -> float:
 
 
 # ----------------------------------------------------------------------------------------------
-# YADE's Mindlin reduced radius at walls
-# ----------------------------------------------------------------------------------------------
-#: YADE's Ip2_FrictMat_FrictMat_MindlinPhys takes r_eff = R1 R2/(R1+R2) from the contact geometry:
-#: a Wall gives R/2, a Facet (refR1 = 2R) gives 2R/3, instead of the flat-wall Hertz value R
-#: that LIGGGHTS uses. Measured: a sphere on a utils.wall had a Hertz contact time 2^(1/5) = 1.149
-#: times too long.
-YADE_WALL_RADIUS_RATIO = {"wall": 0.5, "facet": 2.0 / 3.0}
-#: in the impact scene a rigid plane in YADE is, for each impacting sphere, a fixed sphere this
-#: many times larger centred under that sphere's contact point: r_eff = R (1 - 1e-4), and the
-#: surface sags by (v_t t_c)²/(2 R_b) ~ 1e-8 R over the contact's sliding distance.
-YADE_PLANE_SPHERE_FACTOR = 1e4
-
-
-def yade_wall_young(E: float, nu: float, E_eff_target: float, nu_wall: float, kind: str = "facet") -> float:
-    """Young's modulus [Pa] to give a YADE wall of ``kind`` so that Mindlin's k_n = 4/3 E* √r_eff
-    (and its Tsuji damping) equals the flat-wall Hertz value with ``E_eff_target``: YADE uses
-    r_eff = ratio·R, so its E* must be E_eff_target/√ratio. Raises DerivationError when no
-    positive modulus can do it (a near-rigid wall): use a large fixed sphere instead."""
-    ratio = YADE_WALL_RADIUS_RATIO[kind]
-    need = E_eff_target / math.sqrt(ratio)
-    inv = 1.0 / need - (1 - nu ** 2) / E
-    if inv <= 0:
-        raise DerivationError(f"a YADE {kind} wall cannot reproduce E* = {E_eff_target:.3e} Pa at r_eff = R "
-                              f"(it would need E* = {need:.3e} Pa > E/(1-nu^2) = {E / (1 - nu ** 2):.3e} Pa)")
-    return (1 - nu_wall ** 2) / inv
-
-
-# ----------------------------------------------------------------------------------------------
 # The case -> parameters
 # ----------------------------------------------------------------------------------------------
 #: a Hertz collision is resolved when it spans at least this many steps (O'Sullivan & Bray 2004
@@ -85,8 +58,10 @@ def wall_material(case) -> tuple[float, float]:
     return case.wall_moduli()
 
 
-def derive(case) -> dict:
-    """All numbers the templates need, as a JSON-able dict (SI units)."""
+def derive(case) -> Params:
+    """All numbers the templates need (:class:`orchestrator.params.Params`, SI units). Every
+    engine the case names derives its own numbers from them once here (``Engine.engine_params``),
+    so a case an engine cannot realise is refused when it is validated."""
     mod = get_scene(case.scene.kind)
     mat = case.material
     E, nu, rho = mat.youngs_modulus, mat.poisson_ratio, mat.density
@@ -98,10 +73,6 @@ def derive(case) -> dict:
     G_pp = effective_shear_modulus(E, nu, E, nu)
     G_pw = effective_shear_modulus(E, nu, Ew, nuw)
     e_target = case.contact.restitution
-    try:
-        e_in = restitution_input(e_target)
-    except DerivationError:       # below what LIGGGHTS' clipped Tsuji law can deliver at all:
-        e_in = 0.0                # YADE (unclipped) still can; LIGGGHTS needs its substitute
     v_max = float(mod.max_velocity(case))
     dt_R = rayleigh_time_step(r_min, rho, E, nu)
     # Hertz limit: smallest pair (m* = m/2, R* = r/2) and smallest sphere on a wall at v_max
@@ -119,34 +90,16 @@ def derive(case) -> dict:
                    f"(Rayleigh {dt_R:.3e} s for r_min = {r_min:.3e} m; Hertz t_c/{HERTZ_STEPS_PER_CONTACT} = "
                    f"{dt_H / damping_factor:.3e} s at v = {v_max:.3g} m/s; both times {damping_factor:.3f} for the "
                    f"damping ratio {zeta:.3f} of e_n = {e_target}); ")
-    kt_ratio = case.contact.tangential_stiffness_ratio
-    params = {
-        "material": {"E": E, "nu": nu, "rho": rho, "G": E / (2 * (1 + nu))},
-        "wall": {"E": Ew, "nu": nuw},
-        "E_eff_pp": E_pp, "E_eff_pw": E_pw, "G_eff_pp": G_pp, "G_eff_pw": G_pw,
-        # LIGGGHTS clips tensile forces (limitForce on): fed the inverse of the clipped law;
-        # YADE's Mindlin does not clip: the Tsuji law delivers exactly the e it is fed
-        "restitution": {"target": e_target, "engine_input": e_in, "beta": tsuji_beta(e_in) if e_in > 0 else -1.0,
-                        "yade_input": e_target, "damping_ratio": zeta},
-        "friction": case.contact.friction,
-        "tangential_stiffness_ratio": kt_ratio,
-        "r_min": r_min, "r_max": r_max,
-        "dt": dt, "dt_rayleigh": dt_R, "dt_hertz": dt_H, "dt_critical": dt_crit,
-        "dt_fraction": dt / dt_crit, "v_max": v_max, "dt_damping_factor": damping_factor,
-        "gravity": case.gravity, "gravity_vector": [0.0, 0.0, -case.gravity],
-        "features": list(mod.required_features(case)),
-    }
-    if e_in <= LIGGGHTS_MIN_RESTITUTION_INPUT and "restitution_damping" in params["features"]:
-        # below what LIGGGHTS' model hertz accepts: YADE does it exactly, LIGGGHTS by substitute
-        params["features"].append("low_restitution")
-        m_ref = rho * 4 / 3 * math.pi * r_max ** 3
-        params["restitution"]["hertz_stiffness"] = {
-            "kn_pp": 4.0 / 3.0 * E_pp, "kn_pw": 4.0 / 3.0 * E_pw, "kt_pp": 8.0 * G_pp, "kt_pw": 8.0 * G_pw,
-            "gamman_pp": sqrt_damping_gamma(e_target, m_ref / 2, r_max / 2, E_pp, v_max),
-            "gamman_pw": sqrt_damping_gamma(e_target, m_ref, r_max, E_pw, v_max),
-            "calibrated_at_speed": v_max,
-        }
-    params["scene"] = mod.derive(case, params)
+    params = Params(
+        material=Material(E=E, nu=nu, rho=rho, G=E / (2 * (1 + nu))), wall=WallMaterial(E=Ew, nu=nuw),
+        E_eff_pp=E_pp, E_eff_pw=E_pw, G_eff_pp=G_pp, G_eff_pw=G_pw,
+        restitution=Restitution(target=e_target, damping_ratio=zeta),
+        friction=case.contact.friction, tangential_stiffness_ratio=case.contact.tangential_stiffness_ratio,
+        r_min=r_min, r_max=r_max, dt=dt, dt_rayleigh=dt_R, dt_hertz=dt_H, dt_critical=dt_crit,
+        dt_fraction=dt / dt_crit, v_max=v_max, dt_damping_factor=damping_factor,
+        gravity=case.gravity, gravity_vector=[0.0, 0.0, -case.gravity],
+        features=list(mod.required_features(case)), scene=None)
+    params = params.replace(scene=mod.derive(case, params))
     if too_big:
         from .stability.checks import largest_safe_dt
         dt_max, binding = largest_safe_dt(case, params)
@@ -155,8 +108,10 @@ def derive(case) -> dict:
                               "timestep.allow_unsafe: true")
     # every stability limit (Rayleigh, Hertz at the largest speed incl. walls, damping, rolling and
     # twisting springs, skin) and the in-deck monitors' thresholds (orchestrator.stability.checks)
-    params["stability"] = check(case, params)
-    params["monitors"] = monitor_limits(case, params, params["stability"])
+    report = check(case, params)
+    params = params.replace(stability=report, monitors=monitor_limits(case, params, report))
+    for name in case.engines:          # engine-specific refusals (DerivationError) at validation
+        get_engine(name).engine_params(case, params)
     return params
 
 

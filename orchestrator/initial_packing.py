@@ -116,7 +116,7 @@ def check_initial_packing(case, params, pk) -> None:
 
 def apply_initial_packing(case, params, run_dir) -> dict | None:
     """Write ``particles.txt`` from the case's ``initial_packing`` (no-op without one). Returns the
-    packing's summary for params."""
+    packing's summary for params (its ``grains`` the scene's particle count ``n`` from now on)."""
     ip = getattr(case, "initial_packing", None)
     if ip is None:
         return None
@@ -124,8 +124,6 @@ def apply_initial_packing(case, params, run_dir) -> dict | None:
     check_initial_packing(case, params, pk)
     write_particle_table(Path(run_dir) / "particles.txt", pk["id"], pk["radius"], case.material.density,
                          pk["position"])
-    sc = params["scene"]
-    sc["n"] = int(len(pk["id"]))
     return {"source": pk["source"], "frame": pk["frame"], "grains": int(len(pk["id"])), "id_shift": pk["id_shift"],
             "absent_in_frame": pk["n_absent"], "digest": packing_digest(ip), "_radii": np.sort(pk["radius"])}
 

@@ -28,6 +28,7 @@ from .clock import estimate_engine_time
 from .derive import derive
 from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
+from .params import Params, thaw
 from .registry import get_engine, get_scene
 from .resources import data_file
 from .stability.monitors import read_verdict
@@ -52,16 +53,25 @@ def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | N
     h = hashlib.sha256()
     h.update(case.hash_input().encode())
     params = derive(case) if params is None else params
-    # not hashed: file names, and the pre-run stability report (diagnostics and their wording; the
-    # time step and the monitor limits it leads to are hashed under their own keys)
-    h.update(json.dumps({k: v for k, v in params.items() if k not in ("files", "stability")}, sort_keys=True,
-                        default=str).encode())
+    h.update(json.dumps(hash_params(case, engine_name, params), sort_keys=True, default=str).encode())
     h.update(engine_name.encode())
     h.update(engine_version.encode())
     h.update(templates_hash(engine_name, case.scene.kind).encode())
     if getattr(case, "initial_packing", None) is not None:
         h.update(packing_digest(case.initial_packing).encode())
     return h.hexdigest()[:12]
+
+
+def hash_params(case: Case, engine_name: str, params: Params) -> dict:
+    """The numbers a run hash covers: the shared parameters and the engine's own
+    (``Engine.engine_params``). Not hashed: file names, and the pre-run stability report
+    (diagnostics and their wording; the time step and the monitor limits it leads to are hashed
+    under their own keys)."""
+    d = {k: v for k, v in params.to_dict().items() if k not in ("files", "stability")}
+    own = get_engine(engine_name).engine_params(case, params)
+    if own is not None:
+        d["engine"] = thaw(own)
+    return d
 
 
 def run_dir_for(case: Case, engine_name: str, runs_root="runs") -> Path:
@@ -125,20 +135,24 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case))
 
 
-def prepare(case: Case, engine_name: str, run_dir: Path, params: dict | None = None) -> tuple[dict, list]:
+def prepare(case: Case, engine_name: str, run_dir: Path, params: Params | None = None) -> tuple[Params, list]:
     """Derive parameters (unless given), check capabilities, write case/params/particles.
-    Returns (params, subs)."""
+    Returns (params completed with the scene's files and packed geometry, subs)."""
     eng = get_engine(engine_name)
     params = derive(case) if params is None else params
-    subs = eng.check(params["features"], case.contact.substitutes)
+    subs = eng.check(eng.required_features(case, params), case.contact.substitutes)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
     packing = apply_initial_packing(case, params, run_dir)      # None without case.initial_packing
-    params["files"] = get_scene(case.scene.kind).prepare(case, params, run_dir) or {}
+    if packing is not None:
+        params = params.replace(scene=params.scene.replace(n=int(packing["grains"])))
+    files, scene_part = get_scene(case.scene.kind).prepare(case, params, run_dir)
+    params = params.replace(files=files or {}, scene=scene_part)
     if packing is not None:
         verify_written(case, run_dir, packing)
-        params["initial_packing"] = packing
-    write_json(run_dir / "params.json", params)
+        params = params.replace(initial_packing=packing)
+    own = eng.engine_params(case, params)
+    write_json(run_dir / "params.json", {**params.to_dict(), **({"engine": thaw(own)} if own is not None else {})})
     return params, subs
 
 
@@ -237,8 +251,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         "run_dir": str(run_dir), "deck": deck.name, "status": "rendered" if dry_run else "running",
         "steps": params["scene"].get("total_steps", params["scene"]["steps"]),
         "dt": params["dt"], "dt_critical": params["dt_critical"], "dt_fraction": params["dt_fraction"],
-        "stability": {k: params["stability"][k] for k in ("limits", "fractions", "binding", "dt_max_safe", "ok",
-                                                          "forced")} if "stability" in params else None,
+        "stability": {k: thaw(params.stability[k]) for k in ("limits", "fractions", "binding", "dt_max_safe", "ok",
+                                                             "forced")} if params.stability is not None else None,
         "estimated_engine_time_s": estimate,
         # what the run-time model (orchestrator.clock) is fitted on
         "scene": case.scene.kind, "n_particles": int(params["scene"].get("n", len(params["scene"].get("ids", [])))),

@@ -2,23 +2,18 @@
 from the derived parameters alone (no packing, no meshes), and the refusal of a case that does
 not fit the machine.
 
-Memory per particle (order of magnitude, the engines' own data structures): LIGGGHTS keeps an
-atom (~40 doubles with the granular fix properties), a half neighbour list of ~15 neighbours and
-the tangential contact history (3 doubles per contact); YADE a Body, State, Shape and Material
-object per sphere and ~6 Interactions of ~0.5 kB (IGeom + IPhys). The orchestrator's own packing
-holds positions, radii and a grid index (~0.2 kB per particle), and the LIGGGHTS parse stacks every
-frame of the dump in memory once (T x N x columns doubles). These figures decide refusal only by
-orders of magnitude: a case is refused when it needs more memory than the machine has.
+Memory per particle (order of magnitude, the engines' own data structures) is each engine's
+figure (``Engine.bytes_per_particle``, ``base_bytes``, ``parse_copies``: engines/<name>/adapter.py).
+The orchestrator's own packing holds positions, radii and a grid index (~0.2 kB per particle).
+These figures decide refusal only by orders of magnitude: a case is refused when it needs more
+memory than the machine has.
 """
 from __future__ import annotations
 
 import os
 
-#: engine memory per particle [bytes] (see the module docstring) and a fixed process overhead
-#: LAMMPS: the same atom, neighbour-list and history layout as LIGGGHTS; measured peak RSS of a
-#: one-atom run 31 MB against LIGGGHTS' 30 MB (same session)
-ENGINE_BYTES_PER_PARTICLE = {"liggghts": 2_000, "yade": 5_000, "lammps": 2_000}
-ENGINE_BASE_BYTES = {"liggghts": 50e6, "yade": 300e6, "lammps": 50e6}
+from .registry import get_engine
+
 #: the orchestrator's packing and particle table [bytes per particle]
 PACKING_BYTES_PER_PARTICLE = 200
 #: fraction of the machine's memory a run may plan to use
@@ -61,8 +56,9 @@ def estimate(case, params: dict, engine: str) -> dict:
     o = case.output
     cols = 1 + 3 * (1 + o.velocity + o.angular_velocity + o.force + o.torque) + (7 if o.stress else 0)
     frames_bytes = frames * n * cols * 8
-    engine_mem = ENGINE_BASE_BYTES[engine] + n * ENGINE_BYTES_PER_PARTICLE[engine]
-    parse_mem = 2 * frames_bytes if engine in ("liggghts", "lammps") else frames_bytes
+    eng = get_engine(engine)
+    engine_mem = eng.base_bytes + n * eng.bytes_per_particle
+    parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "frames": frames,
             "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
             "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),

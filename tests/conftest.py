@@ -24,3 +24,13 @@ def engines_installed():
     if missing:
         pytest.fail(f"engine(s) not installed: {missing}; run `bash .ci/setup` (README)")
     return True
+
+
+def pytest_collection_modifyitems(config, items):
+    """Every test that needs the engines (the ``engines_installed`` fixture, directly or through a
+    fixture that runs one) carries the ``engine`` marker, so ``-m "not engine"`` (the fast tier,
+    README) never starts an engine: an unmarked one is a collection error naming it."""
+    bad = [it.nodeid for it in items if "engines_installed" in getattr(it, "fixturenames", ())
+           and it.get_closest_marker("engine") is None]
+    if bad:
+        raise pytest.UsageError("tests that start an engine without @pytest.mark.engine: " + ", ".join(bad))

@@ -123,7 +123,7 @@ def test_liggghts_clumps_need_the_inserted_clumps_substitute(tmp_path):
     out = run_case(case, "liggghts", runs_root=tmp_path, dry_run=True, progress=False)
     assert {"feature": "placed_clumps", "mechanism": "inserted_clumps"}.items() <= out.summary["substitutions"][1].items()
     deck = (out.run_dir / "deck.in").read_text()
-    C = json.loads((out.run_dir / "params.json").read_text())["scene"]["clumps"]["liggghts"]
+    C = json.loads((out.run_dir / "params.json").read_text())["scene"]["clumps"]["inserted"]
     assert deck.count("particletemplate/multisphere") == len(C["templates"]) == 9     # 3 shapes x 3 classes
     assert "fix integrate all multisphere" in deck and "all nve/sphere" not in deck and "read_data" not in deck
     assert f"particles_in_region {case.scene.grains}" in deck
@@ -137,14 +137,14 @@ def test_liggghts_templates_keep_the_shape_mix_and_the_solid_volume():
     """The size classes of inserted_clumps: equal counts, volume-mean diameters inside the class
     bounds, the count of every library shape as YADE's draw, the total solid volume; each template's
     mass is that of its volume-equivalent sphere and its members are centred on the centre of mass."""
-    from orchestrator.scenes.triaxial import _clump_draw, _sample_size, liggghts_clumps
+    from orchestrator.scenes.triaxial import _clump_draw, _sample_size, inserted_clumps
     case = _liggghts_clump_case()
     d = _sample_size(case)[3]
     rho = case.material.density
     k = _clump_draw(case, d)[0]
     for K in (1, 3):
         case.scene.particles.size_classes = K
-        C = liggghts_clumps(case, d)
+        C = inserted_clumps(case, d)
         assert len(C["classes"]) == K and sum(c["count"] for c in C["classes"]) == len(d)
         assert max(c["count"] for c in C["classes"]) - min(c["count"] for c in C["classes"]) <= 1
         for c in C["classes"]:

@@ -105,10 +105,13 @@ def test_tangential_damping_factor_reproduces_liggghts_gamma_t():
 
 
 def test_restitution_input_is_the_clipped_inverse_or_the_target_unclipped():
-    base = {"target": 0.5, "engine_input": 0.41, "damping_ratio": 0.2}
-    assert restitution_damping({"restitution": base}) == {"e_input": 0.41, "limit_damping": True}
-    assert restitution_damping({"restitution": {**base, "engine_input": 0.0}}) == \
-        {"e_input": 0.5, "limit_damping": False}
+    from orchestrator.contact_law import delivered_restitution, restitution_input
+    base = {"target": 0.5, "damping_ratio": 0.2}
+    d = restitution_damping({"restitution": base})
+    assert d == {"e_input": restitution_input(0.5), "limit_damping": True}
+    assert delivered_restitution(round(d["e_input"], 12)) == pytest.approx(0.5, abs=1e-8)
+    # below what the clipped law delivers at all (0.214 at an input of 1e-4): unclipped, the target itself
+    assert restitution_damping({"restitution": {**base, "target": 0.1}}) == {"e_input": 0.1, "limit_damping": False}
     assert restitution_damping({"restitution": {**base, "target": 1.0}})["e_input"] == 1.0
 
 
@@ -150,7 +153,8 @@ def test_numbers_for_a_verification_case():
     from orchestrator.verify import VERIFICATION_DIR
     p = derive(load_case(VERIFICATION_DIR / "chung_ooi_3_restitution_e02.yaml"))
     n = lammps_numbers(p)
-    assert n["damping"]["limit_damping"] and n["damping"]["e_input"] == p["restitution"]["engine_input"]
+    from orchestrator.contact_law import restitution_input
+    assert n["damping"]["limit_damping"] and n["damping"]["e_input"] == restitution_input(p.restitution.target)
     assert n["pair"]["kt"] == 8 * p["G_eff_pp"] and n["wall"]["kt"] == 8 * p["G_eff_pw"]
 
 
@@ -228,12 +232,12 @@ def test_rolling_and_twisting_numbers_are_the_seeds_springs_and_limits():
     from engines.lammps.numbers import rolling_twisting
     d50, rho, kt = 30e-6, 2230.0, 1.9e5
     r_eff = d50 / 4
-    c = {"yade_krot": kt * r_eff ** 2, "yade_ktwist": kt * r_eff ** 2, "rolling_coefficient": 0.3,
+    c = {"rolling_stiffness": kt * r_eff ** 2, "twisting_stiffness": kt * r_eff ** 2, "rolling_coefficient": 0.3,
          "torsion_coefficient": 0.58}
     n = rolling_twisting(c, d50, rho)
     assert n["rolling"]["k"] == pytest.approx(kt, rel=1e-14, abs=0)
     assert n["rolling"]["mu"] == 0.3                    # M_max = mu_r R* F_ncrit: the scene's mu_r itself
     m_eff = rho * 4 / 3 * math.pi * (d50 / 2) ** 3 / 2
     assert n["rolling"]["gamma"] == pytest.approx(2 * math.sqrt(kt * m_eff), rel=1e-14, abs=0)
-    assert n["twisting"]["k"] == c["yade_ktwist"] and n["twisting"]["mu"] == pytest.approx(0.58 * r_eff, rel=1e-14, abs=0)
+    assert n["twisting"]["k"] == c["twisting_stiffness"] and n["twisting"]["mu"] == pytest.approx(0.58 * r_eff, rel=1e-14, abs=0)
     assert rolling_twisting({}, d50, rho) == {}

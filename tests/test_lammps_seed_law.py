@@ -188,7 +188,7 @@ def static_limit(lmp, tmp_path, overlap: float, mode: str) -> tuple[float, float
     r_eff = D50 / 4
     kt = n["kt"]
     # the scene's numbers (scenes/plane_shear.derive): seed000 mu_r r_eff = sqrt(2 r_eff xi) at XI_EXPECTED
-    contact = {"yade_krot": kt * r_eff ** 2, "yade_ktwist": kt * r_eff ** 2,
+    contact = {"rolling_stiffness": kt * r_eff ** 2, "twisting_stiffness": kt * r_eff ** 2,
                "rolling_coefficient": math.sqrt(2 * r_eff * XI_EXPECTED) / r_eff, "torsion_coefficient": MU}
     rt = rolling_twisting(contact, D50, RHO)
     w = 1e3                                                # rad/s: the springs saturate in ~100 steps

@@ -61,10 +61,9 @@ def test_run_hash_ignores_the_stability_report_wording():
     case = load_case(CASES / "shear_cell_smoke.yaml")
     params = derive(case)
     h = run_hash(case, "liggghts", "3.8.0", params)
-    params["stability"] = dict(params["stability"], note="reworded")
+    params = params.replace(stability=dict(params.stability, note="reworded"))
     assert run_hash(case, "liggghts", "3.8.0", params) == h
-    params["dt"] = params["dt"] * 0.5
-    assert run_hash(case, "liggghts", "3.8.0", params) != h
+    assert run_hash(case, "liggghts", "3.8.0", params.replace(dt=params.dt * 0.5)) != h
 
 
 def test_complete_run_drops_its_resume_points(tmp_path):

@@ -192,22 +192,25 @@ def test_single_contact_substitutes_vs_seed():
     dist = 2 * R - xs
     A = np.pi / 4 * ((dist - 2 * R) * dist * dist * (dist + 2 * R)) / dist ** 2
     A = np.abs(A)
-    f_sjkr = c["liggghts_cohesion_energy_density"] * A
+    from engines.liggghts.numbers import liggghts_numbers
+    from engines.yade.numbers import yade_numbers
+    lig, yad = liggghts_numbers(case, params), yade_numbers(case, params)
+    f_sjkr = lig.cohesion_energy_density * A
     f_seed = c["adhesion_force"]
     ratio = f_sjkr / f_seed
     assert ratio[2] == pytest.approx(1.0, rel=1e-3)                 # matched at the expected overlap
     assert ratio[0] == pytest.approx(0.1, rel=1e-2) and ratio[-1] == pytest.approx(10, rel=2e-2)
-    assert 4 * np.pi * c["yade_gamma"] * r_eff == pytest.approx(f_seed, rel=1e-12)   # YADE DMT exact
+    assert 4 * np.pi * yad.gamma * r_eff == pytest.approx(f_seed, rel=1e-12)   # YADE DMT exact
     lever_seed = np.sqrt(2 * r_eff * xs)
     lever_epsd2 = c["rolling_coefficient"] * r_eff
-    lever_yade = c["yade_eta"] * R
+    lever_yade = yad.eta * R
     assert lever_epsd2 / lever_seed[2] == pytest.approx(1.0, rel=1e-9)
     assert lever_yade == pytest.approx(lever_epsd2, rel=1e-12)
     assert lever_epsd2 / lever_seed[0] == pytest.approx(np.sqrt(10), rel=1e-9)     # frozen: off by sqrt(xi_s/xi)
     # torsion: seed limit mu r_eff |F|; LIGGGHTS epsd2 torsionTorque shares the rolling limit;
     # YADE's twisting spring has no limit at all
     assert c["torsion_coefficient"] * r_eff / lever_epsd2 > 10
-    assert "yade_ktwist" in c
+    assert yad.ktwist == c["twisting_stiffness"]
 
 
 # ------------------------------------------------------------------------------------------------

@@ -65,13 +65,14 @@ print("RESULT " + json.dumps({"wall_max": wall_max, "pair_max": pair_max, "kno":
 
 def run(tmp_path, visco_elastic: bool, roll: bool = False) -> dict:
     gamma = F_ADH / (4 * math.pi * R / 2)       # DMT F = 4 pi gamma r_eff, r_eff = R/2 for the pair
-    contact = {"yade_gamma": gamma, "yade_eta": 0.1, "yade_krot": 1e-9, "yade_ktwist": 1e-9,
-               "restitution": {"yade_input": 1.0, "target": 1.0, "from": "elastic"}}
+    contact = {"restitution": {"target": 1.0, "from": "elastic"}}
     p = {"material": {"E": E, "nu": NU, "rho": RHO}, "friction": math.tan(0.5), "wall": {"nu": NU},
-         "scene": {"contact": contact, "wall_adhesion": False, "yade_wall_E": E, "wall_mu": 0.0}}
+         "scene": {"contact": contact, "wall_adhesion": False, "wall_mu": 0.0}}
+    engine = {"contact_restitution_input": 1.0, "wall_young": E, "gamma": gamma, "eta": 0.1, "krot": 1e-9,
+              "ktwist": 1e-9}
     text = environment().from_string(SCRIPT).render(
         R=R, E=E, NU=NU, RHO=RHO, OMEGA0=OMEGA0, visco_elastic=visco_elastic, roll=roll,
-        g=G_ROLL if roll else 0.0, p=p)
+        g=G_ROLL if roll else 0.0, p=p, engine=engine)
     script = tmp_path / f"wall_contacts_{visco_elastic}_{roll}.py"
     script.write_text(text)
     proc = subprocess.run(["yade", "-n", "-x", str(script)], capture_output=True, text=True, timeout=300)
@@ -140,6 +141,7 @@ print("RESULT " + json.dumps({"out": out, "phys": phys}))
 """
 
 
+@pytest.mark.engine
 @pytest.mark.usefixtures("engines_installed")
 def test_grain_functor_is_the_frictmat_hertz_mindlin(tmp_path):
     """The deck's grain-grain functor (Ip2_PartialSatMat_PartialSatMat_MindlinPhys, chosen so that

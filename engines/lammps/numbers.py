@@ -18,7 +18,7 @@ Sources (LAMMPS 22 Jul 2025, ``src/GRANULAR``):
 - ``damping coeff_restitution`` (``GranSubModDampingCoeffRestitution``): η_n = 2√(5/6)(-β)
   √(m* S_n), S_n = 2 E* a, β = ln e/√(ln²e + π²): LIGGGHTS' and YADE's Tsuji form; with
   ``limit_damping`` the total normal force is clipped at zero as LIGGGHTS' ``limitForce on``,
-  so the same inverse (:func:`orchestrator.derive.restitution_input`) delivers the requested e;
+  so the same inverse (:func:`orchestrator.contact_law.restitution_input`) delivers the requested e;
 - tangential damping η_t = x_γt η_n: LIGGGHTS uses η_t = 2√(5/6)(-β)√(m* S_t), S_t = 8 G* a,
   so x_γt = √(S_t/S_n) = √(4 G*/E*) (:func:`tangential_damping_factor`);
 - ``damping viscoelastic``: η_n = η_n0 a m* (Brilliantov et al. 1996): the damping force
@@ -27,6 +27,8 @@ Sources (LAMMPS 22 Jul 2025, ``src/GRANULAR``):
 from __future__ import annotations
 
 import math
+
+from orchestrator.contact_law import DerivationError, restitution_input
 
 
 def wall_young(E_eff_target: float, nu: float) -> float:
@@ -46,12 +48,13 @@ def restitution_damping(params: dict) -> dict:
     (``limit_damping``) the e that LIGGGHTS is fed (the clipped law's inverse); below what the
     clipped law can deliver (``engine_input`` 0) the unclipped law is used and fed the target
     itself, as YADE is (Antypov & Elliott 2011, eq. 17)."""
-    r = params["restitution"]
-    if r["target"] >= 1.0:
+    target = params["restitution"]["target"]
+    if target >= 1.0:
         return {"e_input": 1.0, "limit_damping": True}
-    if r["engine_input"] > 0:
-        return {"e_input": r["engine_input"], "limit_damping": True}
-    return {"e_input": r["target"], "limit_damping": False}
+    try:
+        return {"e_input": restitution_input(target), "limit_damping": True}
+    except DerivationError:      # below what the clipped law delivers at all
+        return {"e_input": target, "limit_damping": False}
 
 
 def viscoelastic_eta(gamma_n: float, m_eff: float, R_eff: float) -> float:
@@ -67,8 +70,8 @@ def seed_gamma_n(E_eff: float, m_eff: float) -> float:
 
 def rolling_twisting(contact: dict, d50: float, rho: float) -> dict:
     """``rolling sds k_r γ_r μ_r`` and ``twisting sds k_tw γ_tw μ_tw`` for seed 000's rolling and
-    twisting resistance (§3.2), from a scene's contact numbers (``yade_krot`` = ``yade_ktwist`` =
-    k_t r_eff², ``rolling_coefficient`` μ_r with M_max = μ_r r_eff |F_n|, ``torsion_coefficient``
+    twisting resistance (§3.2), from a scene's contact numbers (``rolling_stiffness`` =
+    ``twisting_stiffness`` = k_t r_eff², ``rolling_coefficient`` μ_r with M_max = μ_r r_eff |F_n|, ``torsion_coefficient``
     μ_tor/r_eff), for the median pair (r_eff = d50/4, m_eff = m50/2).
 
     LAMMPS (``gran_sub_mod_rolling``): F_r = −k_r ξ_r − γ_r v_r, ξ_r = ∫v_r dt the rolling
@@ -83,10 +86,10 @@ def rolling_twisting(contact: dict, d50: float, rho: float) -> dict:
     m_eff, I_eff = m50 / 2.0, 0.4 * m50 * (d50 / 2.0) ** 2 / 2.0
     out = {}
     if "rolling_coefficient" in contact:
-        kr = contact["yade_krot"] / r_eff ** 2
+        kr = contact["rolling_stiffness"] / r_eff ** 2
         out["rolling"] = {"k": kr, "gamma": 2.0 * math.sqrt(kr * m_eff), "mu": contact["rolling_coefficient"]}
     if "torsion_coefficient" in contact:
-        ktw = contact["yade_ktwist"]
+        ktw = contact["twisting_stiffness"]
         out["twisting"] = {"k": ktw, "gamma": 2.0 * math.sqrt(ktw * I_eff), "mu": contact["torsion_coefficient"] * r_eff}
     return out
 
@@ -97,8 +100,8 @@ def lammps_numbers(params: dict, case=None) -> dict:
     mat = params["material"]
     d = restitution_damping(params)
     extra = {}
-    contact = params.get("scene", {}).get("contact")
-    if isinstance(contact, dict) and case is not None and hasattr(getattr(case.scene, "psd", None), "median"):
+    contact = params["scene"].get("contact")
+    if contact is not None and case is not None and hasattr(getattr(case.scene, "psd", None), "median"):
         extra = rolling_twisting(contact, case.scene.psd.median, mat["rho"])
     return {**extra,
         "damping": d,

@@ -29,6 +29,7 @@ from ..base import Engine, EngineError, tail
 from ..lammps_dump import COLUMNS, per_atom_arrays, read_binary_dump, stress_tensors, truncate_binary_dump
 from ..render import render_template
 from . import triaxial
+from .numbers import liggghts_numbers, seed_term_ratios
 from .segments import dump_segments, wall_rows
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
@@ -49,6 +50,12 @@ class Liggghts(Engine):
     executable = "liggghts"
     throughput = 6e6        # ENGINES.md: 2000 dense Hertz spheres on one core of this machine
     startup = 0.5
+    # an atom (~40 doubles with the granular fix properties), a half neighbour list of ~15
+    # neighbours and the tangential history (3 doubles per contact); the parse stacks every frame
+    # of the dump once more
+    bytes_per_particle = 2_000
+    base_bytes = 50e6
+    parse_copies = 2
     capabilities = {
         "hertz": "pair_style gran model hertz",
         "restitution_damping": "model hertz with coefficientRestitution (Tsuji damping), limitForce on",
@@ -111,6 +118,19 @@ class Liggghts(Engine):
         m = re.search(r"Version (LIGGGHTS-PUBLIC [^,]+)", out)
         return m.group(1) if m else out.splitlines()[0] if out else "unknown"
 
+    # -- numbers ----------------------------------------------------------------------------
+    def engine_params(self, case, params):
+        return liggghts_numbers(case, params)
+
+    def seed_term_ratios(self, case, params, overlaps):
+        return seed_term_ratios(case, params, overlaps)
+
+    def required_features(self, case, params) -> list[str]:
+        feats = list(params.features)
+        if self.engine_params(case, params).low_restitution:
+            feats.append("low_restitution")      # below what model hertz can be fed: a substitute
+        return feats
+
     # -- render -----------------------------------------------------------------------------
     def render(self, case, params, run_dir: Path, resume=None) -> Path:
         run_dir = Path(run_dir)
@@ -121,7 +141,7 @@ class Liggghts(Engine):
         if not data.exists() and not _inserted(params):
             write_data_file(data, run_dir / "particles.txt", params["scene"]["box_lo"], params["scene"]["box_hi"])
         ctx = {
-            "case": case, "p": params, "resume": resume,
+            "case": case, "p": params, "engine": self.engine_params(case, params), "resume": resume,
             "files": {"data": data.name, **{k: Path(v).name for k, v in params.get("files", {}).items()}},
             "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
             "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),
@@ -317,7 +337,7 @@ def dump_columns(case) -> list[str]:
 def _inserted(params) -> bool:
     """True when the deck inserts its particles itself (no read_data file)."""
     sc = params.get("scene", {})
-    return bool(sc.get("clumps") and sc["clumps"].get("liggghts"))
+    return bool(sc.get("clumps") and sc["clumps"].get("inserted"))
 
 
 #: frames.h5 fields LIGGGHTS' dump custom gives (spheres: no orientation)

@@ -32,7 +32,7 @@ def check_inserted_clumps(run_dir, params) -> None:
     deck's fix named when the first frame holds fewer clumps than asked (the deck itself stops with
     an ERROR line right after an incomplete insertion)."""
     sc = params["scene"]
-    C = (sc.get("clumps") or {}).get("liggghts")
+    C = (sc.get("clumps") or {}).get("inserted")
     if not C:
         return
     run_dir = Path(run_dir)
@@ -169,7 +169,7 @@ def resume_point(run_dir: Path, resume: dict | None) -> dict | None:
 
 def clumps_summary(run_dir: Path, params: dict, first_step: int) -> None:
     """The substitute's figures in ``scene_summary.json`` (the runner copies it into summary.json)."""
-    C = (params["scene"].get("clumps") or {}).get("liggghts")
+    C = (params["scene"].get("clumps") or {}).get("inserted")
     f = Path(run_dir) / "scene_summary.json"
     if not C or not f.exists():
         return

@@ -20,6 +20,7 @@ from orchestrator.registry import get_scene
 
 from ..base import Engine, EngineError, Substitution, UnsupportedFeature, tail
 from ..render import render_template
+from .numbers import yade_numbers, seed_term_ratios
 from .output import ChunkOutput, chunk_files, membrane_series
 
 _PROGRESS = re.compile(r"^PROGRESS (\d+)")
@@ -32,6 +33,10 @@ class Yade(Engine):
     executable = "yade"
     throughput = 1.5e6      # ENGINES.md: 2000 dense Hertz spheres on one core of this machine
     startup = 2.0
+    # a Body, State, Shape and Material object per sphere and ~6 Interactions of ~0.5 kB (IGeom + IPhys)
+    bytes_per_particle = 5_000
+    base_bytes = 300e6
+    parse_copies = 1
     capabilities = {
         "hertz": "Ip2_FrictMat_FrictMat_MindlinPhys + Law2_ScGeom_MindlinPhys_Mindlin",
         "restitution_damping": "Mindlin en/es (Tsuji damping); the tensile damping force is not clipped, so e_n = en exactly",
@@ -93,6 +98,12 @@ class Yade(Engine):
         m = re.search(r"Yade version:\s*(\S+)", out)
         return f"YADE {m.group(1)}" if m else "unknown"
 
+    def engine_params(self, case, params):
+        return yade_numbers(case, params)
+
+    def seed_term_ratios(self, case, params, overlaps):
+        return seed_term_ratios(case, params, overlaps)
+
     def render(self, case, params, run_dir: Path, resume=None) -> Path:
         run_dir = Path(run_dir)
         (run_dir / "dump").mkdir(exist_ok=True)
@@ -101,7 +112,7 @@ class Yade(Engine):
         fields = o.fields()
         n = max(1, len(sc.get("ids", [])) or 1)
         ctx = {
-            "case": case, "p": params, "resume": resume,
+            "case": case, "p": params, "engine": self.engine_params(case, params), "resume": resume,
             "files": {k: Path(v).name for k, v in params.get("files", {}).items()},
             "dump_every": sc["dump_every"], "thermo_every": max(1, sc["steps"] // 200),
             "restart_every": max(1, sc.get("restart_every", sc["steps"] // 10)),

@@ -83,4 +83,4 @@ def analyze_friction(frames, radius: float | None = None, torque_wall: str | Non
             "n": int(mu.size), "radius_m": radius, "torque_wall": tw, "force_wall": fw, "geometry": geometry}
     return Result("friction", tables={"friction": df}, scalars=scal,
                   options={"radius": radius, "torque_wall": tw, "force_wall": fw, "geometry": geometry,
-                           "steady_from": steady_from}, plotter=plot_friction)
+                           "steady_from": steady_from, "steady_control": steady_control}, plotter=plot_friction)

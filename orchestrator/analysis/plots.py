@@ -143,11 +143,14 @@ def plot_shearband(res, **kw):
                 a1.plot(erf_profile(z, f["z_sb"].iloc[0], f["w_sb"].iloc[0]), z * MM, "-", color=l[0].get_color())
         a1.legend(fontsize=7)
     a1.set_xlabel(r"$v_{\tilde\varphi}$"); a1.set_ylabel("z [mm]")
+    control = res.scalars.get("control", "control")
     if len(bd):
-        a2.errorbar(bd["control"], bd["z_sb"] * MM, yerr=bd["z_sb_err"] * MM, fmt="o-", label=r"$z_{sb}$")
-        a2.errorbar(bd["control"], bd["w_sb"] * MM, yerr=bd["w_sb_err"] * MM, fmt="s-", label=r"$w_{sb}$")
+        # an angle control is stored in rad (frames.h5 is SI); shown in degrees as seed 000's Fig. 2
+        x = np.degrees(bd["control"]) if control == "angle" else bd["control"]
+        a2.errorbar(x, bd["z_sb"] * MM, yerr=bd["z_sb_err"] * MM, fmt="o-", label=r"$z_{sb}$")
+        a2.errorbar(x, bd["w_sb"] * MM, yerr=bd["w_sb_err"] * MM, fmt="s-", label=r"$w_{sb}$")
         a2.legend(fontsize=8)
-    a2.set_xlabel(res.scalars.get("control", "control")); a2.set_ylabel("mm")
+    a2.set_xlabel("angle [deg]" if control == "angle" else control); a2.set_ylabel("mm")
     if len(st):
         a3.errorbar(st["r_tilde"] * MM, st["z_sb"] * MM, yerr=st["z_sb_err"] * MM, fmt="o-")
     a3.set_xlabel("r̃ [mm]"); a3.set_ylabel(r"steady $z_{sb}$ [mm]")
@@ -159,10 +162,17 @@ def plot_friction(res, **kw):
     t = res.tables["friction"]
     fig, (ax,) = _fig()
     x = "angle" if "angle" in t else "time"
+    if x == "angle":                 # the stages before the rotation (angle 0) are not friction
+        t = t[t["angle"] > 0]
     ax.plot(np.degrees(t[x]) if x == "angle" else t[x], t["mu"], lw=1)
     m = res.scalars.get("mu_mean")
     if m is not None and np.isfinite(m):
         ax.axhline(m, color="k", ls="--", lw=0.8, label=rf"$\mu_{{macro}}$ = {m:.3f} ± {res.scalars['mu_std']:.3f}")
+        start = res.options.get("steady_from")
+        if start is not None and len(t):      # the window the mean and its ± are taken over
+            s0 = np.degrees(start) if res.options.get("steady_control") == "angle" else start
+            s1 = np.degrees(t[x].max()) if x == "angle" else t[x].max()
+            ax.axvspan(s0, s1, color="0.9", zorder=0, label="steady window")
         ax.legend(fontsize=8)
     ax.set_xlabel("angle [deg]" if x == "angle" else "time [s]"); ax.set_ylabel(r"$\mu_{macro}$")
     return fig

@@ -33,6 +33,7 @@ import pandas as pd
 
 from ..case import load_case
 from ..derive import derive
+from ..registry import engine_names, get_engine
 from ..stability.executor import get_executor, run_task
 
 __all__ = ["Rung", "RUNGS", "rungs_for", "LadderResult", "run_ladder", "compare_rungs", "FLOORS",
@@ -253,32 +254,14 @@ def single_contact_differences(case_path) -> pd.DataFrame:
     psd = getattr(case.scene, "psd", None)
     if not c or psd is None or "expected_overlap" not in c:
         return pd.DataFrame(columns=["term", "engine", "mechanism", "ξ/ξ_σ = 0.1", "ξ/ξ_σ = 1", "ξ/ξ_σ = 10"])
-    R = psd.median / 2
-    r_eff = R / 2
     scales = np.array([0.1, 1.0, 10.0])
     xs = c["expected_overlap"] * scales
     rows = []
-    if "adhesion_force" in c:
-        d = 2 * R - xs
-        area = np.abs(np.pi / 4 * ((d - 2 * R) * d * d * (d + 2 * R)) / d ** 2)   # sphere-intersection disc
-        if "liggghts_cohesion_energy_density" in c:
-            rows.append(("adhesion", "liggghts", "sjkr k·A(ξ), k matched at ξ_σ",
-                         *(c["liggghts_cohesion_energy_density"] * area / c["adhesion_force"])))
-        if "yade_gamma" in c:
-            rows.append(("adhesion", "yade", "DMT 4πγ r_eff (constant)",
-                         *([4 * math.pi * c["yade_gamma"] * r_eff / c["adhesion_force"]] * 3)))
-    if "rolling_coefficient" in c:
-        lever_seed = np.sqrt(2 * r_eff * xs)
-        rows.append(("rolling limit", "liggghts", "epsd2 μ_r r_eff |F| (μ_r frozen at ξ_σ)",
-                     *(c["rolling_coefficient"] * r_eff / lever_seed)))
-        if "yade_eta" in c:
-            rows.append(("rolling limit", "yade", "Mindlin moment η R̄ |F|", *(c["yade_eta"] * R / lever_seed)))
-    if "torsion_coefficient" in c:
-        lever_seed = c["torsion_coefficient"] * r_eff
-        if "rolling_coefficient" in c:
-            rows.append(("torsion limit", "liggghts", "epsd2 torsion shares the rolling limit",
-                         *([c["rolling_coefficient"] * r_eff / lever_seed] * 3)))
-        rows.append(("torsion limit", "yade", "Mindlin ktwist: elastic, no limit", *([math.inf] * 3)))
+    for name in engine_names():       # each engine package states how it realises the seed's terms
+        for term, mechanism, ratios in get_engine(name).seed_term_ratios(case, params, xs):
+            rows.append((term, name, mechanism, *ratios))
+    order = {"adhesion": 0, "rolling limit": 1, "torsion limit": 2}
+    rows.sort(key=lambda r: order.get(r[0], 3))          # stable: engines in name order within a term
     return pd.DataFrame(rows, columns=["term", "engine", "mechanism", "ξ/ξ_σ = 0.1", "ξ/ξ_σ = 1", "ξ/ξ_σ = 10"])
 
 

@@ -18,6 +18,7 @@ from typing import Any, ClassVar, Mapping, Protocol
 
 import numpy as np
 
+from ..params import Params, ScenePart, StabilityInputs
 from ..particles_io import write_particle_table
 from ..registry import get_scene, scene_kinds
 
@@ -96,8 +97,10 @@ class Scene(ABC):
         """Physics features the engines must offer (vocabulary: engines.base.FEATURES)."""
 
     @abstractmethod
-    def derive(self, case, common: dict) -> dict:
-        """The scene's numbers for the templates (SI), from the case and the common parameters."""
+    def derive(self, case, common: Params) -> ScenePart:
+        """The scene's numbers for the templates: a frozen dataclass (subclass of
+        :class:`orchestrator.params.ScenePart`, units in its field docs), from the case and the
+        common parameters (``common.scene`` is not set yet)."""
 
     @abstractmethod
     def max_velocity(self, case) -> float:
@@ -108,22 +111,27 @@ class Scene(ABC):
         r = case.scene.radius
         return r, r
 
-    def stability_inputs(self, case, params: dict) -> dict:
-        """Wall speeds [m/s], confining stress [Pa], skin [m], height [m], wall force target [N]
-        for orchestrator.stability.checks (missing keys: neutral defaults)."""
-        return {}
+    def stability_inputs(self, case, params: Params) -> StabilityInputs:
+        """What orchestrator.stability.checks needs from this scene (particle count, steps, box,
+        wall speeds [m/s], confining stress [Pa], skin [m], height [m], wall force target [N],
+        contact springs): :class:`orchestrator.params.StabilityInputs`; the default knows only the
+        particles (fields ``n``, ``steps``) of the scene's numbers."""
+        sc = params.scene
+        return StabilityInputs(n_particles=int(getattr(sc, "n", 0)), total_steps=int(getattr(sc, "steps", 0)),
+                               box_lo=getattr(sc, "box_lo", None), box_hi=getattr(sc, "box_hi", None))
 
     # -- files -----------------------------------------------------------------------------
-    def prepare(self, case, params: dict, run_dir: Path) -> dict:
+    def prepare(self, case, params: Params, run_dir: Path) -> tuple[dict, ScenePart]:
         """Write the shared input files (particle table, meshes) into ``run_dir``; return their
-        paths by name for the templates."""
-        sc = params["scene"]
+        paths by name for the templates, and the scene's numbers completed with what preparing
+        found (e.g. the packed geometry; parameters are frozen: a new object)."""
+        sc = params.scene
         if not (Path(run_dir) / "particles.txt").exists():
-            write_particle_table(Path(run_dir) / "particles.txt", sc["ids"], sc["radius"], case.material.density,
-                                 sc["position"], sc.get("velocity"))
-        return {}
+            write_particle_table(Path(run_dir) / "particles.txt", sc.ids, sc.radius, case.material.density,
+                                 sc.position, getattr(sc, "velocity", None))
+        return {}, sc
 
-    def post(self, run_dir: Path, params: dict, output: EngineOutput) -> dict:
+    def post(self, run_dir: Path, params: Params, output: EngineOutput) -> dict:
         """Controls per frame (``{"controls": {name: array}}``, names as :attr:`controls`) and wall
         series (``{"walls": {name: {"time": ..., ...}}}``) from an engine's output; may write
         ``scene_summary.json`` into ``run_dir``."""

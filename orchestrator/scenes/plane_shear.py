@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -34,6 +35,7 @@ from pydantic import Field, field_validator
 from ..case import Strict, positive
 from ..numerics import multiple_of
 from ..derive import adhesion_force, DerivationError
+from ..params import ContactTerms, Params, ScenePart, StabilityInputs
 from ..particles_io import ensure_particle_table
 from ..psd import lognormal_diameters, mean_sphere_volume
 from ..units import Pressure
@@ -135,24 +137,60 @@ def max_velocity(case) -> float:
     return 2 * max(v_servo, v_shear)
 
 
-def stability_inputs(case, params) -> dict:
-    sc = params["scene"]
-    return {"wall_speeds": {"servo": sc["servo"]["v_max"], "shear": sc["v_shear"]},
-            "confining_stress": case.scene.normal_stress, "skin": sc["skin"],
-            "height": sc["geometry"]["z_top"] - sc["geometry"]["z_bottom"],
-            "wall_force_target": sc["servo"]["target_force"], "periodic": [True, True, False],
-            "adhesion_force": sc["contact"]["adhesion_force"]}
+def stability_inputs(case, params) -> StabilityInputs:
+    sc = params.scene
+    c = sc.contact
+    return StabilityInputs(
+        n_particles=sc.n, total_steps=sc.total_steps, box_lo=sc.box_lo, box_hi=sc.box_hi,
+        wall_speeds={"servo": sc.servo.v_max, "shear": sc.v_shear},
+        confining_stress=case.scene.normal_stress, skin=sc.skin,
+        height=sc.geometry.z_top - sc.geometry.z_bottom,
+        wall_force_target=sc.servo.target_force, periodic=(True, True, False),
+        adhesion_force=c.adhesion_force, restitution=c.restitution.target,
+        rolling_stiffness=c.rolling_stiffness, rolling_coefficient=c.rolling_coefficient,
+        twisting_stiffness=c.twisting_stiffness, torsion_coefficient=c.torsion_coefficient)
 
 
-def derive(case, common: dict) -> dict:
+@dataclass(frozen=True)
+class PlaneShearParams(ScenePart):
+    """The plane-shear scene's numbers (SI). Steps are absolute step numbers of the one run."""
+    n: int                 #: all grains, mobile and wall [-]
+    n_mobile: int          #: mobile grains [-]
+    n_wall: int            #: grains per wall [-]
+    ids_mobile: tuple      #: [first, last] id of the mobile grains
+    ids_bottom: tuple      #: [first, last] id of the bottom wall's grains
+    ids_top: tuple         #: [first, last] id of the top wall's grains
+    geometry: dict         #: box and wall geometry (:func:`geometry`) [m]
+    box_lo: tuple          #: simulation box [m]
+    box_hi: tuple
+    stages: dict           #: stage -> [first step, last step] (compress, shear)
+    steps: int             #: last step [-]
+    total_steps: int       #: = steps
+    events: tuple          #: deck events: {step, frame (bool), begin ("shear" or "")}
+    frame_steps: tuple     #: steps of the frames
+    frame_stage: tuple     #: stage code of each frame (STAGES)
+    dump_every: int        #: [-] (frames are written by events)
+    restart_every: int     #: steps between restart points
+    wall_every: int        #: steps between wall samples
+    servo: dict            #: target_force [N], v_max [m/s], kp [-], tau [s], travel [m]
+    v_shear: float         #: top wall's shear speed [m/s]
+    shear_rate: float      #: nominal shear rate v_shear/H [1/s]
+    skin: float            #: neighbour skin [m]
+    wall_mass: float       #: mass of one wall [kg]
+    contact: ContactTerms  #: contact terms beyond Hertz-Mindlin
+    gravity: float         #: [m/s²]
+    steady_from_strain: float   #: shear strain the steady state is averaged from [-]
+
+
+def derive(case, common: Params) -> PlaneShearParams:
     s = case.scene
     g = geometry(case)
-    dt = common["dt"]
+    dt = common.dt
     rho = case.material.density
     x50 = s.psd.median
     v_max, v_shear = _speeds(case, g)
     F_target = s.normal_stress * g["L"] ** 2
-    E_pp = common["E_eff_pp"]
+    E_pp = common.E_eff_pp
     E_bulk = (E_pp ** 2 * s.normal_stress) ** (1 / 3)
     k_bulk = E_bulk * g["L"] ** 2 / g["H_dense"]
     tau_servo = F_target / (v_max * s.servo_gain * k_bulk)
@@ -177,7 +215,8 @@ def derive(case, common: dict) -> dict:
     nw = g["n_wall"]
     # contact terms
     F_adh = adhesion_force(case)
-    contact = {"adhesion_force": F_adh, "restitution": dict(common["restitution"])}
+    contact = {"adhesion_force": F_adh, "restitution": common.restitution.to_dict(), "r_eff_mean": x50 / 4,
+               "median_radius": x50 / 2}
     c = case.contact
     # overlap of a median pair (r_eff = x50/4) under the mean contact force of the packing,
     # F_c = π x50² σ/(4 φ) + F_adh (4 contacts per grain; as scenes.shear_cell._expected_overlap)
@@ -185,44 +224,31 @@ def derive(case, common: dict) -> dict:
     Fc = s.normal_stress * x50 ** 2 / (s.dense_fraction * 4 / math.pi) + F_adh
     xi = (3 * Fc / (4 * E_pp * math.sqrt(r_eff))) ** (2 / 3)
     if F_adh > 0:
-        contact["yade_gamma"] = F_adh / (4 * math.pi * r_eff)
-        contact["liggghts_cohesion_energy_density"] = F_adh / (2 * math.pi * r_eff * xi)
         contact["expected_overlap"] = xi
     # rolling and twisting resistance exactly as the shear cell (scenes/shear_cell.py): seed §3.2
     # springs k_r = k_tw = k_t r_eff² with k_t = 2/7 k_n, k_n = 4/3 E* x50/2; rolling limit
     # M = μ_r r_eff |F_n| (seed000: μ_r r_eff = √(2 r_eff ξ)); engines' stand-ins are substitutes
     kt_seed = 2 / 7 * (4 / 3 * E_pp * x50 / 2)
-    if "liggghts" in case.engines and _has_torsion(c):
-        chosen = c.substitutes.get("liggghts.torsion_friction", c.substitutes.get("torsion_friction"))
-        if chosen not in (None, "epsd2_torsion_torque"):
-            raise DerivationError(f"contact.substitutes: the plane-shear LIGGGHTS deck implements 'torsion_friction' "
-                                  f"only as 'epsd2_torsion_torque', not '{chosen}'")
-        if not _has_rolling(c):
-            raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (epsd2 torsionTorque) needs rolling "
-                                  "friction too; add contact.rolling")
     if _has_rolling(c):
         mu_r = math.sqrt(2 * r_eff * xi) / r_eff if c.rolling.model == "seed000" else c.rolling.coefficient
         contact["rolling_coefficient"] = mu_r
-        contact["yade_eta"] = mu_r * r_eff / (x50 / 2)        # YADE: M_max = eta R_mean |F_n|
-        contact["yade_krot"] = kt_seed * r_eff ** 2
+        contact["rolling_stiffness"] = kt_seed * r_eff ** 2
         contact["expected_overlap"] = xi
     if _has_torsion(c):
         contact["torsion_coefficient"] = c.torsion.coefficient
-        contact["yade_ktwist"] = kt_seed * r_eff ** 2
-    return {
-        "n": n_mobile + 2 * nw, "n_mobile": n_mobile, "n_wall": nw,
-        "ids_mobile": [1, n_mobile], "ids_bottom": [n_mobile + 1, n_mobile + nw],
-        "ids_top": [n_mobile + nw + 1, n_mobile + 2 * nw],
-        "geometry": g, "box_lo": g["box_lo"], "box_hi": g["box_hi"],
-        "stages": {"compress": [0, s1], "shear": [s1, s2]}, "steps": s2, "total_steps": s2,
-        "events": events, "frame_steps": frame_steps, "frame_stage": frame_stage,
-        "dump_every": max(1, s2), "restart_every": multiple_of(max(1000, s2 // 5), wall_every), "wall_every": wall_every,
-        "servo": {"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo,
-                  "travel": travel},
-        "v_shear": v_shear, "shear_rate": gamma_dot, "skin": skin,
-        "wall_mass": nw * rho * math.pi / 6 * g["d_wall"] ** 3,
-        "contact": contact, "gravity": case.gravity, "steady_from_strain": s.steady_from * s.shear_strain,
-    }
+        contact["twisting_stiffness"] = kt_seed * r_eff ** 2
+    return PlaneShearParams(
+        n=n_mobile + 2 * nw, n_mobile=n_mobile, n_wall=nw,
+        ids_mobile=[1, n_mobile], ids_bottom=[n_mobile + 1, n_mobile + nw],
+        ids_top=[n_mobile + nw + 1, n_mobile + 2 * nw],
+        geometry=g, box_lo=g["box_lo"], box_hi=g["box_hi"],
+        stages={"compress": [0, s1], "shear": [s1, s2]}, steps=s2, total_steps=s2,
+        events=events, frame_steps=frame_steps, frame_stage=frame_stage,
+        dump_every=max(1, s2), restart_every=multiple_of(max(1000, s2 // 5), wall_every), wall_every=wall_every,
+        servo={"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo, "travel": travel},
+        v_shear=v_shear, shear_rate=gamma_dot, skin=skin,
+        wall_mass=nw * rho * math.pi / 6 * g["d_wall"] ** 3,
+        contact=ContactTerms(**contact), gravity=case.gravity, steady_from_strain=s.steady_from * s.shear_strain)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -286,9 +312,9 @@ def sample_particles(case, params) -> dict:
     return {"id": np.arange(1, len(radius) + 1), "radius": radius, "position": position}
 
 
-def prepare(case, params, run_dir) -> dict:
+def prepare(case, params, run_dir) -> tuple[dict, PlaneShearParams]:
     table = ensure_particle_table(run_dir, case, lambda: sample_particles(case, params))
-    return {"particles": str(table)}
+    return {"particles": str(table)}, params.scene
 
 
 # ------------------------------------------------------------------------------------------------

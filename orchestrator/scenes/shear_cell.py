@@ -28,6 +28,7 @@ to both engines.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -37,8 +38,9 @@ from scipy.integrate import solve_ivp
 
 from ..atomic import write_json
 from ..case import Strict, positive
-from ..derive import adhesion_force, DerivationError, yade_wall_young, tsuji_beta, restitution_input
+from ..derive import adhesion_force, DerivationError
 from ..numerics import multiple_of
+from ..params import ContactTerms, Params, ScenePart, StabilityInputs
 from ..geometry import cylinder_shell, vaned_piston, write_stl
 from ..particles_io import ensure_particle_table
 from ..psd import lognormal_diameters, mean_sphere_volume, pack_cylinder
@@ -265,12 +267,46 @@ def _expected_overlap(case, E_eff: float, F_adh: float) -> tuple[float, float]:
     return xi, Fc
 
 
-def derive(case, common: dict) -> dict:
+@dataclass(frozen=True)
+class ShearCellParams(ScenePart):
+    """The shear cell's numbers (SI). Steps are absolute step numbers of the one run."""
+    n: int                       #: grains [-]
+    geometry: dict               #: cell geometry (:func:`geometry_numbers`) [m, m², m³]
+    psd: dict                    #: the case's size distribution (diameters [m])
+    stages: dict                 #: stage -> [first step, last step] (relax, compress, shear)
+    steps: int                   #: last step [-]
+    total_steps: int             #: = steps [-]
+    events: tuple                #: deck events: {step, frame (bool), begin (stage name or "")}
+    frame_steps: tuple           #: steps of the frames [-]
+    frame_angles: tuple          #: shear angle of each frame [rad]
+    frame_stage: tuple           #: stage code of each frame (STAGES)
+    dump_every: int              #: [-] (frames are written by events)
+    restart_every: int           #: steps between restart points [-]
+    wall_every: int              #: steps between wall samples [-]
+    average_window_steps: int    #: compression check's averaging window [steps]
+    gamma_visc: float            #: relaxation drag γ, F = -γ v [N s/m]
+    relax_tau_steps: int         #: relaxation time m50/γ [steps]
+    m50: float                   #: mass of a median grain [kg]
+    servo: dict                  #: target_force [N], v_max [m/s], kp [-], tau [s], E_bulk_estimate [Pa], travel_time [s]
+    omega: float                 #: angular velocity of the rotating parts [rad/s]
+    rotation_period: float       #: 2π/ω [s]
+    quasi_static_number: float   #: ω √(ρ x50²/σ) [-]
+    contact: ContactTerms        #: contact terms beyond Hertz-Mindlin
+    gravity: float               #: [m/s²]
+    skin: float                  #: neighbour skin [m]
+    box_lo: tuple                #: simulation box [m]
+    box_hi: tuple
+    wall_adhesion: bool          #: walls keep the adhesion
+    wall_friction: bool          #: walls have Coulomb friction
+    wall_mu: float               #: wall friction coefficient [-]
+
+
+def derive(case, common: Params) -> ShearCellParams:
     s = case.scene
     g = geometry_numbers(case)
     mat = case.material
     rho = mat.density
-    dt = common["dt"]
+    dt = common.dt
     n = g["n"]
     x50 = s.psd.median
     m50 = rho * math.pi / 6 * x50 ** 3
@@ -284,7 +320,7 @@ def derive(case, common: dict) -> dict:
     # ---- stage 2: compression
     v_max = _v_max(case, g)
     F_target = s.normal_stress * g["piston_area"]
-    E_pp = common["E_eff_pp"]
+    E_pp = common.E_eff_pp
     # bulk modulus of a Hertz packing under σ: E_b ~ (E*² σ)^(1/3) (effective-medium scaling)
     E_bulk = (E_pp ** 2 * s.normal_stress) ** (1 / 3)
     k_bulk = E_bulk * g["piston_area"] / g["h_dense_estimate"]
@@ -315,87 +351,53 @@ def derive(case, common: dict) -> dict:
     events = []
     for st in sorted(set(frame_steps) | set(begins) | {s3}):
         events.append({"step": st, "frame": st in frame_steps, "begin": begins.get(st, "")})
-    # ---- contact terms (both engines get the same numbers)
+    # ---- contact terms (every engine gets the same numbers; engines/<name>/numbers.py turn them
+    # into their own law's inputs)
     F_adh = adhesion_force(case)
     r_eff_mean = x50 / 4
-    E_pw = common["E_eff_pw"]
     xi, Fc = _expected_overlap(case, E_pp, F_adh)
     kn_seed = 4 / 3 * E_pp * x50 / 2            # seed §3.2: k_n = 4/3 E_eff x50/2
     kt_seed = 2 / 7 * kn_seed
     c = case.contact
     contact = {"adhesion_force": F_adh, "expected_overlap": xi, "expected_contact_force": Fc,
-               "kn_seed": kn_seed, "kt_seed": kt_seed, "r_eff_mean": r_eff_mean}
-    subs = case.contact.substitutes
-    implemented = {"adhesion": "sjkr_matched_overlap", "torsion_friction": "epsd2_torsion_torque"}
-    if "liggghts" in case.engines:
-        for feat, name in implemented.items():
-            chosen = subs.get(f"liggghts.{feat}", subs.get(feat))
-            if feat in common["features"] and chosen not in (None, name):
-                raise DerivationError(f"contact.substitutes: the shear cell's LIGGGHTS deck implements '{feat}' only "
-                                      f"as '{name}', not '{chosen}'")
-        if "torsion_friction" in common["features"] and not (c.rolling is not None and (c.rolling.model == "seed000"
-                                                                                        or c.rolling.coefficient > 0)):
-            raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (epsd2 torsionTorque) needs rolling "
-                                  "friction too; add contact.rolling")
-    if F_adh > 0:
-        # YADE: DMT F = 4 pi gamma r_eff, exact for the seed's F_adh r_eff/<r_eff>
-        contact["yade_gamma"] = F_adh / (4 * math.pi * r_eff_mean)
-        # LIGGGHTS sjkr: F = k A, A ≈ 2 pi r_eff ξ; matched at the expected overlap
-        contact["liggghts_cohesion_energy_density"] = F_adh / (2 * math.pi * r_eff_mean * xi)
+               "kn_seed": kn_seed, "kt_seed": kt_seed, "r_eff_mean": r_eff_mean, "median_radius": x50 / 2}
     if c.rolling is not None and (c.rolling.model == "seed000" or c.rolling.coefficient > 0):
         # rolling torque limit M = mu_r r_eff |F|; seed000: mu_r r_eff = sqrt(2 r_eff ξ)
         mu_r = math.sqrt(2 * r_eff_mean * xi) / r_eff_mean if c.rolling.model == "seed000" else c.rolling.coefficient
         contact["rolling_coefficient"] = mu_r
-        contact["yade_eta"] = mu_r * r_eff_mean / (x50 / 2)   # YADE: M_max = eta R_mean |F_n|
-        contact["yade_krot"] = kt_seed * r_eff_mean ** 2      # rolling spring k_r = k_t r_eff^2
+        contact["rolling_stiffness"] = kt_seed * r_eff_mean ** 2      # rolling spring k_r = k_t r_eff^2
     if c.torsion is not None and c.torsion.coefficient > 0:
         contact["torsion_coefficient"] = c.torsion.coefficient
-        contact["yade_ktwist"] = kt_seed * r_eff_mean ** 2
+        contact["twisting_stiffness"] = kt_seed * r_eff_mean ** 2
     # damping: seed000 -> the restitution seed's gamma_n delivers at the servo speed
     if c.damping == "seed000":
         v_char = max(v_max, omega * g["R_cyl"])
         e_seed = seed000_restitution(E_pp, m50 / 2, x50 / 4, v_char)
         e_seed = min(max(e_seed, 0.05), 1.0)
-        e_in = restitution_input(e_seed)
-        contact["restitution"] = {"target": e_seed, "engine_input": e_in, "beta": tsuji_beta(e_in),
-                                  "yade_input": e_seed,   # YADE does not clip the tensile force (derive.py)
-                                  "from": f"seed000 gamma_n at v = {v_char:.3g} m/s"}
+        contact["restitution"] = {"target": e_seed, "from": f"seed000 gamma_n at v = {v_char:.3g} m/s"}
     else:
-        contact["restitution"] = dict(common["restitution"], **{"from": "contact.restitution"})
-    # YADE walls are facets: r_eff = 2R/3; give them the modulus that restores flat-wall Hertz
-    E_w, nu_w = common["wall"]["E"], common["wall"]["nu"]
-    yade_wall = None
-    try:
-        yade_wall = yade_wall_young(mat.youngs_modulus, mat.poisson_ratio, E_pw, nu_w, "facet")
-    except DerivationError as exc:
-        if "yade" in case.engines:
-            raise DerivationError(f"wall: {exc}. The seed uses the particle material for the walls "
-                                  "(wall: {youngs_modulus: ..., poisson_ratio: ..., density: ...})") from None
+        contact["restitution"] = dict(common.restitution.to_dict(), **{"from": "contact.restitution"})
     skin = max(skin, 0.25 * s.psd.d_max)
     box_margin = 2 * s.psd.d_max
     R = g["R_cyl"]
-    return {
-        "n": n, "geometry": g, "psd": s.psd.model_dump(),
-        "stages": {"relax": [s0, s1], "compress": [s1, s2], "shear": [s2, s3]},
-        "steps": s3, "total_steps": s3,
-        "events": events, "frame_steps": frame_steps, "frame_angles": frame_angles, "frame_stage": frame_stage,
-        "dump_every": max(1, s3), "restart_every": multiple_of(max(1000, s3 // 10), wall_every), "wall_every": wall_every,
-        "average_window_steps": max(wall_every, int(math.ceil(s.average_window * n_settle))),
-        "gamma_visc": gamma_visc, "yade_drag_nu": gamma_visc / (6 * math.pi * x50 / 2),
-        "relax_tau_steps": tau_steps, "m50": m50,
-        "servo": {"target_force": F_target, "v_max": v_max, "kp": s.servo_gain,
-                  "yade_kP": v_max * s.servo_gain / F_target, "tau": tau_servo, "E_bulk_estimate": E_bulk,
-                  "travel_time": t_travel},
-        "omega": omega, "rotation_period": 2 * math.pi / omega,
-        "quasi_static_number": omega * math.sqrt(rho * x50 ** 2 / s.normal_stress),
-        "contact": contact, "gravity": case.gravity,
-        "yade_wall_E": yade_wall, "skin": skin,
-        "box_lo": [-R - box_margin, -R - box_margin, g["z_can"][0] - box_margin],
-        "box_hi": [R + box_margin, R + box_margin, g["z_can"][1] + box_margin],
-        "wall_adhesion": s.wall_adhesion,
+    return ShearCellParams(
+        n=n, geometry=g, psd=s.psd.model_dump(),
+        stages={"relax": [s0, s1], "compress": [s1, s2], "shear": [s2, s3]},
+        steps=s3, total_steps=s3,
+        events=events, frame_steps=frame_steps, frame_angles=frame_angles, frame_stage=frame_stage,
+        dump_every=max(1, s3), restart_every=multiple_of(max(1000, s3 // 10), wall_every), wall_every=wall_every,
+        average_window_steps=max(wall_every, int(math.ceil(s.average_window * n_settle))),
+        gamma_visc=gamma_visc, relax_tau_steps=tau_steps, m50=m50,
+        servo={"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo,
+               "E_bulk_estimate": E_bulk, "travel_time": t_travel},
+        omega=omega, rotation_period=2 * math.pi / omega,
+        quasi_static_number=omega * math.sqrt(rho * x50 ** 2 / s.normal_stress),
+        contact=ContactTerms(**contact), gravity=case.gravity, skin=skin,
+        box_lo=[-R - box_margin, -R - box_margin, g["z_can"][0] - box_margin],
+        box_hi=[R + box_margin, R + box_margin, g["z_can"][1] + box_margin],
+        wall_adhesion=s.wall_adhesion,
         # seed §3.3: walls are Hertz + damping (eq. 1's visco-elastic part): Coulomb mu only if asked
-        "wall_friction": s.wall_friction, "wall_mu": case.contact.friction if s.wall_friction else 0.0,
-    }
+        wall_friction=s.wall_friction, wall_mu=case.contact.friction if s.wall_friction else 0.0)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -425,7 +427,7 @@ def sample_particles(case, params) -> dict:
     return {"id": np.arange(1, g["n"] + 1), "radius": d / 2, "position": pos}
 
 
-def prepare(case, params, run_dir) -> dict:
+def prepare(case, params, run_dir) -> tuple[dict, ShearCellParams]:
     """Write particles.txt (and LIGGGHTS' particles.data) and the three STL meshes."""
     run_dir = Path(run_dir)
     files = {}
@@ -436,7 +438,7 @@ def prepare(case, params, run_dir) -> dict:
         files[name] = str(p)
     table = ensure_particle_table(run_dir, case, lambda: sample_particles(case, params))
     files["particles"] = str(table)
-    return files
+    return files, params.scene
 
 
 # ------------------------------------------------------------------------------------------------
@@ -523,11 +525,16 @@ class ShearCellScene(base.Scene):
     size_range = staticmethod(size_range)
 
     def stability_inputs(self, case, params):
-        sc = params["scene"]
-        return {"wall_speeds": {"servo": sc["servo"]["v_max"], "rotating_rim": sc["omega"] * sc["geometry"]["R_cyl"]},
-                "confining_stress": case.scene.normal_stress, "skin": sc["skin"],
-                "height": sc["box_hi"][2] - sc["box_lo"][2],
-                "wall_force_target": sc["servo"]["target_force"]}
+        sc = params.scene
+        c = sc.contact
+        return StabilityInputs(
+            n_particles=sc.n, total_steps=sc.total_steps, box_lo=sc.box_lo, box_hi=sc.box_hi,
+            wall_speeds={"servo": sc.servo.v_max, "rotating_rim": sc.omega * sc.geometry.R_cyl},
+            confining_stress=case.scene.normal_stress, skin=sc.skin, height=sc.box_hi[2] - sc.box_lo[2],
+            wall_force_target=sc.servo.target_force, adhesion_force=c.adhesion_force,
+            restitution=c.restitution.target, rolling_stiffness=c.rolling_stiffness,
+            rolling_coefficient=c.rolling_coefficient, twisting_stiffness=c.twisting_stiffness,
+            torsion_coefficient=c.torsion_coefficient)
 
     prepare = staticmethod(prepare)
 

@@ -46,6 +46,7 @@ import hashlib
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -59,6 +60,7 @@ from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
 from ..derive import DerivationError
 from ..numerics import running_mean
+from ..params import Params, ScenePart, StabilityInputs, opt
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
@@ -222,7 +224,7 @@ class Particles(Strict):
     enter through ``fix insert/*``): with the substitute ``inserted_clumps`` accepted in
     ``contact.substitutes`` it inserts the same shapes, the same number of grains of each shape, in
     ``size_classes`` volume-mean sizes, at random places and orientations into the sample cylinder
-    (:func:`liggghts_clumps`)."""
+    (:func:`inserted_clumps`)."""
     shape: Literal["spheres", "clumps"] = "spheres"
     library: str | None = Field(None, description="clump library file (.yaml/.yml or .npz); relative paths "
                                                   "are taken from the working directory")
@@ -359,7 +361,7 @@ def _prime_at_least(n: int) -> int:
     return n
 
 
-def liggghts_clumps(case, d: np.ndarray) -> dict:
+def inserted_clumps(case, d: np.ndarray) -> dict:
     """Substitute ``inserted_clumps`` (LIGGGHTS-PUBLIC 3.8): what the deck needs to insert the grains
     of volume-equivalent diameters ``d`` [m] as multisphere bodies.
 
@@ -483,23 +485,67 @@ def _sample_size_uncached(case):
     return D * k, H * k, n, d
 
 
-def stability_inputs(case, params) -> dict:
+def stability_inputs(case, params) -> StabilityInputs:
     """What orchestrator.stability's pre-run check and in-deck monitors need: the confining
     pressure, the platen speeds (stage-1 servo limit, stage-2 loading), the sample height and the
     top platen's force scale p·πD²/4 (the monitors' wall-force figure trips at
     ``stability.wall_force_factor`` times it)."""
-    sc = params["scene"]
-    return {"wall_speeds": {"servo": sc["iso"]["v_max"], "loading": sc["strain_rate"] * sc["height"]},
-            "confining_stress": sc["pressure"], "skin": sc["skin"], "height": sc["height"],
-            "wall_force_target": sc["pressure"] * math.pi * sc["diameter"] ** 2 / 4}
+    sc = params.scene
+    return StabilityInputs(
+        n_particles=sc.n, n_spheres=sc.n_spheres, total_steps=sc.total_steps, box_lo=sc.box_lo, box_hi=sc.box_hi,
+        wall_speeds={"servo": sc.iso.v_max, "loading": sc.strain_rate * sc.height},
+        confining_stress=sc.pressure, skin=sc.skin, height=sc.height,
+        wall_force_target=sc.pressure * math.pi * sc.diameter ** 2 / 4)
 
 
-def derive(case, common: dict) -> dict:
+@dataclass(frozen=True)
+class TriaxialParams(ScenePart):
+    """The triaxial scene's numbers (SI). The packing's fields (``radius0`` ...) and the box are set
+    by :func:`prepare`, which packs the grains."""
+    n: int                    #: grains [-]
+    ids: tuple                #: their ids 1..n
+    n_spheres: int | None     #: clumps: member spheres the engines integrate [-]
+    diameter: float           #: sample diameter [m]
+    height: float             #: sample height [m]
+    d50: float                #: mean diameter [m]
+    pressure: float           #: confining pressure [Pa]
+    axial_strain: float       #: final axial strain [-]
+    strain_rate: float        #: loading strain rate [1/s]
+    inertial_number: float    #: loading inertial number [-]
+    shear_steps: int          #: steps of the loading stage [-]
+    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s]
+    dump_every: int           #: steps between frames [-]
+    series_every: int         #: steps between series rows [-]
+    steps: int                #: steps of both stages [-]
+    total_steps: int          #: = steps
+    restart_every: int        #: steps between resume points [-]
+    platen_friction: float    #: platen Coulomb μ [-]
+    clumps: dict | None       #: clumps: discretization and the inserted-clumps templates (:func:`inserted_clumps`)
+    membrane: dict            #: membrane mesh and springs: n_theta, n_z [-], node_radius [m], E_conn, E_facet [Pa], k_contact [N/m], node_mass [kg], damping [N s/m] ...
+    lateral: dict             #: shell boundary: bands, sectors [-], shell [m], update_every [steps]
+    skin: float               #: neighbour skin [m]
+    series_columns: tuple     #: columns of triax.txt
+    servo_every: int          #: steps between servo updates [-]
+    diameters: tuple | None = opt("sampled volume-equivalent diameters [m] (dropped once packed)")
+    radius0: float | None = opt("packed sample radius [m]")
+    z_bottom0: float | None = opt("packed sample's lowest point [m]")
+    z_top0: float | None = opt("packed sample's highest point [m]")
+    height0: float | None = opt("packed sample height [m]")
+    packing_fraction0: float | None = opt("packed solid fraction [-]")
+    packing_iterations: int | None = opt("collective-rearrangement iterations [-]")
+    clump_count: int | None = opt("clumps packed [-]")
+    clump_members: int | None = opt("member spheres packed [-]")
+    clump_bounding_scale: float | None = opt("bounding-sphere scale of the clump draw [-]")
+    box_lo: tuple | None = opt("simulation box, lower corner [m]")
+    box_hi: tuple | None = opt("simulation box, upper corner [m]")
+
+
+def derive(case, common: Params) -> TriaxialParams:
     s = case.scene
     D, H, n, d = _sample_size(case)
     rho = case.material.density
     p = s.confining_pressure
-    dt = common["dt"]
+    dt = common.dt
     d50 = s.psd.mean_diameter()
     rate = strain_rate(case)
     # --- frames and chunks --------------------------------------------------------------------
@@ -519,7 +565,7 @@ def derive(case, common: dict) -> dict:
     # --- lateral boundary numbers -------------------------------------------------------------
     bands = s.lateral.bands or max(1, int(round(H / (3 * d50))))
     m = s.membrane
-    E_pw = common["E_eff_pw"]
+    E_pw = common.E_eff_pw
     # Hertz tangent stiffness of a d50 grain on a flat wall carrying F = p d50^2
     F = p * d50 ** 2
     R = d50 / 2
@@ -565,7 +611,7 @@ def derive(case, common: dict) -> dict:
     v_t = s.isotropic.drag_inertial_number * math.sqrt(p / rho)
     nu = p * d50 / (3 * math.pi * v_t) if s.isotropic.drag else 0.0
     if nu > 0:
-        r_min = common["r_min"]
+        r_min = common.r_min
         tau = 2 * rho * r_min ** 2 / (9 * nu)          # m/b of the smallest grain
         if dt > tau:
             raise DerivationError(f"scene.isotropic.drag: the drag time m/b = {tau:.3g} s of the smallest grain is "
@@ -594,7 +640,7 @@ def derive(case, common: dict) -> dict:
         # work is lost; the cost is measured in docs/triaxial.md (Resume)
         "restart_every": dump_every,
         "platen_friction": s.platen_friction,
-        "clumps": ({"discretization": s.particles.discretization, "liggghts": liggghts_clumps(case, d)}
+        "clumps": ({"discretization": s.particles.discretization, "inserted": inserted_clumps(case, d)}
                    if s.particles.shape == "clumps" else None),
         "membrane": {"n_theta": n_theta, "n_z": n_z, "node_radius": r_node, "E_conn": E_conn,
                      "E_facet": E_facet, "k_contact": k_contact, "node_mass": m_node,
@@ -613,13 +659,13 @@ def derive(case, common: dict) -> dict:
         # overlap at p per update
         "servo_every": servo_every,
     }
-    return params
+    return TriaxialParams(**params)
 
 
-def prepare(case, params: dict, run_dir: Path) -> dict:
-    """Pack the grains (cached in run_dir), write particles.txt and the platen meshes; complete
-    params['scene'] with the packed geometry."""
-    sc = params["scene"]
+def prepare(case, params: Params, run_dir: Path) -> tuple[dict, TriaxialParams]:
+    """Pack the grains (cached in run_dir), write particles.txt and the platen meshes; return the
+    files and the scene's numbers completed with the packed geometry."""
+    sc = params.scene
     run_dir = Path(run_dir)
     geo_path = run_dir / "packing.json"
     if geo_path.exists() and (run_dir / "particles.txt").exists():
@@ -638,20 +684,16 @@ def prepare(case, params: dict, run_dir: Path) -> dict:
         pos, geo = cached_packing(r, sc["diameter"] / 2, sc["height"], case.seed + 2)
         write_particle_table(run_dir / "particles.txt", sc["ids"], r, case.material.density, pos)
         write_json(geo_path, geo)
-    sc.update(geo)
-    sc.pop("diameters", None)
     R0 = geo["radius0"]
-    # YADE platens: fixed spheres this large (sag over the sample radius R0: R0 * 5e-7)
-    sc["yade_platen_radius"] = 1e6 * R0
     half = 3.0 * R0
-    sc["box_lo"] = [-half, -half, geo["z_bottom0"] - 2 * R0]
-    sc["box_hi"] = [half, half, geo["z_top0"] + 2 * R0]
+    sc = sc.replace(**geo, diameters=None, box_lo=[-half, -half, geo["z_bottom0"] - 2 * R0],
+                    box_hi=[half, half, geo["z_top0"] + 2 * R0])
     files = {}
     for name, z in (("bottom", geo["z_bottom0"]), ("top", geo["z_top0"])):
         f = run_dir / f"platen_{name}.stl"
         _write_square_stl(f, 1.6 * R0 * 1.5, z, up=(name == "bottom"))
         files[f"platen_{name}"] = str(f)
-    return files
+    return files, sc
 
 
 def _write_square_stl(path: Path, half: float, z: float, up: bool):

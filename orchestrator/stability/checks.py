@@ -35,6 +35,7 @@ import math
 
 from ..contact_law import (DerivationError, damping_ratio, hertz_contact_time, hertz_max_overlap,
                            rayleigh_time_step)
+from ..params import StabilityInputs
 from ..registry import get_scene
 
 #: limits that are about stability (dt must stay below safe_fraction × limit)
@@ -45,23 +46,15 @@ COORDINATION = 6
 STEPS_PER_CONTACT = 10
 
 
-def scene_inputs(case, params: dict) -> dict:
-    """What the checks need from the scene: confining stress [Pa], wall speeds [m/s], neighbour
-    skin [m], height of the granular region [m], contact spring constants, from the scene's
-    ``stability_inputs`` (:class:`orchestrator.scenes.base.Scene`); missing keys take neutral defaults."""
-    sc = params.get("scene", {})
-    out = dict(get_scene(case.scene.kind).stability_inputs(case, params))
-    out.setdefault("wall_speeds", {})
-    out.setdefault("confining_stress", 0.0)
-    out.setdefault("skin", 0.5 * params["r_max"])
-    out.setdefault("height", 0.0)
-    c = sc.get("contact", {}) if isinstance(sc.get("contact"), dict) else {}
-    out.setdefault("adhesion_force", c.get("adhesion_force", 0.0))
-    out.setdefault("yade_krot", c.get("yade_krot"))
-    out.setdefault("rolling_coefficient", c.get("rolling_coefficient"))
-    out.setdefault("yade_ktwist", c.get("yade_ktwist"))
-    out.setdefault("torsion_coefficient", c.get("torsion_coefficient"))
-    return out
+def scene_inputs(case, params) -> StabilityInputs:
+    """What the checks need from the scene, asked of it (``Scene.stability_inputs``,
+    :class:`orchestrator.params.StabilityInputs`): particles, steps, box, confining stress [Pa],
+    wall speeds [m/s], neighbour skin [m] (default r_max/2), height of the granular region [m],
+    contact springs and limits."""
+    inp = get_scene(case.scene.kind).stability_inputs(case, params)
+    if inp.skin is None:
+        inp = inp.replace(skin=0.5 * params.r_max)
+    return inp
 
 
 def _static_overlap(F: float, E_eff: float, R_eff: float) -> float:
@@ -73,24 +66,23 @@ def critical_steps(case, params: dict) -> dict:
     """All limits [s] and the inputs they came from (see the module docstring)."""
     mat = case.material
     E, nu, rho = mat.youngs_modulus, mat.poisson_ratio, mat.density
-    r_min, r_max = params["r_min"], params["r_max"]
+    r_min, r_max = params.r_min, params.r_max
     m_min = rho * 4 / 3 * math.pi * r_min ** 3
     inp = scene_inputs(case, params)
-    v_walls = max(inp["wall_speeds"].values(), default=0.0)
+    v_walls = max(inp.wall_speeds.values(), default=0.0)
     # particle speeds from the scene (derive's v_max) and twice any wall speed (rebound off a wall)
-    v = max(params["v_max"], 2 * v_walls)
-    sc_c = params.get("scene", {}).get("contact")
+    v = max(params.v_max, 2 * v_walls)
     e = case.contact.restitution
-    if isinstance(sc_c, dict) and isinstance(sc_c.get("restitution"), dict):
-        e = min(e, sc_c["restitution"].get("target", e))     # e.g. the restitution seed000 damping delivers
+    if inp.restitution is not None:
+        e = min(e, inp.restitution)      # e.g. the restitution seed000 damping delivers
     zeta = damping_ratio(e)
     fd = math.sqrt(1 + zeta ** 2) - zeta
-    sigma = inp["confining_stress"]
-    F_adh = inp["adhesion_force"] or 0.0
+    sigma = inp.confining_stress
+    F_adh = inp.adhesion_force or 0.0
     # a big grain's share of the confining force, pressed onto the smallest contact (conservative)
     F_conf = sigma * (2 * r_max) ** 2 / 0.6 + F_adh
-    pairs = {"particle-particle": (m_min / 2, r_min / 2, params["E_eff_pp"]),
-             "particle-wall": (m_min, r_min, params["E_eff_pw"])}
+    pairs = {"particle-particle": (m_min / 2, r_min / 2, params.E_eff_pp),
+             "particle-wall": (m_min, r_min, params.E_eff_pw)}
     hertz, tc, detail = math.inf, math.inf, {}
     for name, (m, R, Es) in pairs.items():
         d_imp = hertz_max_overlap(m, R, Es, v) if v > 0 else 0.0
@@ -111,8 +103,8 @@ def critical_steps(case, params: dict) -> dict:
         # engines damp it like the normal spring (c_t from e with k_t and m*), so its damping
         # ratio relative to that mass is ζ √3.5. Measured (YADE, e = 0.15): unstable at 0.37 of
         # the normal Hertz limit, which this limit reproduces (docs/stability.md).
-        G_pp = params["G_eff_pp"]
-        kt_ratio = 4 * G_pp / params["E_eff_pp"]
+        G_pp = params.G_eff_pp
+        kt_ratio = 4 * G_pp / params.E_eff_pp
         w_t = math.sqrt(kt_ratio * 3.5) * detail["particle-particle"]["omega"]
         zeta_t = zeta * math.sqrt(3.5)
         fd_t = math.sqrt(1 + zeta_t ** 2) - zeta_t
@@ -137,21 +129,21 @@ def critical_steps(case, params: dict) -> dict:
     I_half = 0.5 * 0.4 * m_min * r_min ** 2
     kn = detail["particle-particle"]["k_tangent"]
     R_pp = r_min / 2
-    k_r = [k for k in (inp["yade_krot"],
-                       2.25 * kn * inp["rolling_coefficient"] ** 2 * R_pp ** 2 if inp["rolling_coefficient"] else None)
+    k_r = [k for k in (inp.rolling_stiffness,
+                       2.25 * kn * inp.rolling_coefficient ** 2 * R_pp ** 2 if inp.rolling_coefficient else None)
            if k]
     if k_r:
         limits["rolling"] = 2 / math.sqrt(max(k_r) / I_half) * fd
-    k_t = [k for k in (inp["yade_ktwist"],
-                       2.25 * kn * inp["torsion_coefficient"] ** 2 * R_pp ** 2 if inp["torsion_coefficient"] else None)
+    k_t = [k for k in (inp.twisting_stiffness,
+                       2.25 * kn * inp.torsion_coefficient ** 2 * R_pp ** 2 if inp.torsion_coefficient else None)
            if k]
     if k_t:
         limits["twisting"] = 2 / math.sqrt(max(k_t) / I_half) * fd
-    skin = inp["skin"]
+    skin = inp.skin
     if v > 0 and skin > 0:
         limits["skin"] = 0.5 * skin / v
     return {"limits": limits, "damping_ratio": zeta, "damping_factor": fd, "speed": v,
-            "wall_speeds": inp["wall_speeds"], "confining_stress": sigma, "confining_force": F_conf,
+            "wall_speeds": dict(inp.wall_speeds), "confining_stress": sigma, "confining_force": F_conf,
             "skin": skin, "contacts": detail, "inputs": inp}
 
 
@@ -173,19 +165,19 @@ def check(case, params: dict) -> dict:
     """The stability report for ``params['dt']``; raises DerivationError when dt is above a safe
     fraction of any limit and the case does not set ``timestep.allow_unsafe``."""
     cs = critical_steps(case, params)
-    dt = params["dt"]
+    dt = params.dt
     safe = safe_fractions(case)
     fractions = {k: dt / v for k, v in cs["limits"].items()}
     over = {k: f for k, f in fractions.items() if f > safe[k]}
     binding = min(cs["limits"], key=lambda k: cs["limits"][k] * safe[k])
     dt_max = cs["limits"][binding] * safe[binding]
     report = {"dt": dt, "limits": cs["limits"], "fractions": fractions, "safe_fractions": safe,
-              "binding": binding, "dt_max_safe": dt_max, "dt_max_safe_fraction_of_critical": dt_max / params["dt_critical"],
+              "binding": binding, "dt_max_safe": dt_max, "dt_max_safe_fraction_of_critical": dt_max / params.dt_critical,
               "ok": not over, "forced": bool(over) and case.timestep.allow_unsafe,
               "damping_factor": cs["damping_factor"], "damping_ratio": cs["damping_ratio"],
               "speed": cs["speed"], "wall_speeds": cs["wall_speeds"], "confining_stress": cs["confining_stress"],
               "skin": cs["skin"], "contacts": cs["contacts"]}
-    worst = max(c["overlap"] for c in cs["contacts"].values() if "overlap" in c) / params["r_min"]
+    worst = max(c["overlap"] for c in cs["contacts"].values() if "overlap" in c) / params.r_min
     if worst > 0.1:
         report["warnings"] = [f"the stiffest contact is expected at an overlap of {worst:.2g} r_min (a big grain's "
                               f"share of the confining force on two smallest grains): Hertz is not valid there; the "
@@ -200,7 +192,7 @@ def check(case, params: dict) -> dict:
             + (", ".join(f"{n} {s:.3g} m/s" for n, s in cs["wall_speeds"].items()) or "none")
             + f"), confining stress {cs['confining_stress']:.3g} Pa, skin {cs['skin']:.3g} m. "
             f"The largest safe dt is {dt_max:.3e} s ({binding}): use timestep.fraction <= "
-            f"{int(dt_max / params['dt_critical'] * 1000) / 1000:g} or a dt below {dt_max:.3e} s, "
+            f"{int(dt_max / params.dt_critical * 1000) / 1000:g} or a dt below {dt_max:.3e} s, "
             "or set timestep.allow_unsafe: true to run anyway (the monitors still watch the run)")
     return report
 
@@ -208,16 +200,15 @@ def check(case, params: dict) -> dict:
 def monitor_limits(case, params: dict, report: dict) -> dict:
     """Thresholds for the in-deck monitors (handed to the templates as ``p.monitors``)."""
     o = case.stability
-    sc = params["scene"]
-    n = int(sc.get("n", len(sc.get("ids", [])) or 0))
-    rho = case.material.density
-    r_min, r_max = params["r_min"], params["r_max"]
-    steps = int(sc.get("total_steps", sc.get("steps", 0)))
     inp = scene_inputs(case, params)
+    n = int(inp.n_particles)
+    rho = case.material.density
+    r_min, r_max = params.r_min, params.r_max
+    steps = int(inp.total_steps)
     m_mean = rho * 4 / 3 * math.pi * ((r_min + r_max) / 2) ** 3
     mass = n * m_mean
     v = report["speed"]
-    ke_scale = 0.5 * mass * v ** 2 + mass * abs(case.gravity) * inp["height"]
+    ke_scale = 0.5 * mass * v ** 2 + mass * abs(case.gravity) * inp.height
     ke_scale = max(ke_scale, 0.5 * mass * (1e-3 * math.sqrt(case.material.youngs_modulus / rho)) ** 2 * 1e-6)
     expected = max(c["overlap"] for c in report["contacts"].values() if "overlap" in c) / r_min
     # The overlap figure looks for blow-up, not for accuracy: it trips above overlap_limit, raised to
@@ -233,11 +224,11 @@ def monitor_limits(case, params: dict, report: dict) -> dict:
            "ke_limit": o.ke_factor * ke_scale, "ke_scale": ke_scale,
            "overlap_limit": overlap_limit, "r_min": r_min,
            # spheres the engine integrates: a clump scene's member spheres (scene key n_spheres)
-           "n_particles": int(sc.get("n_spheres") or n), "wall_force_target": inp.get("wall_force_target"),
+           "n_particles": int(inp.n_spheres or n), "wall_force_target": inp.wall_force_target,
            "wall_force_factor": o.wall_force_factor}
-    if sc.get("box_lo") is not None:
-        out["box_lo"], out["box_hi"] = list(sc["box_lo"]), list(sc["box_hi"])
-        out["periodic"] = list(inp.get("periodic", [False, False, False]))
+    if inp.box_lo is not None:
+        out["box_lo"], out["box_hi"] = list(inp.box_lo), list(inp.box_hi)
+        out["periodic"] = list(inp.periodic)
     if out["wall_force_target"]:
         out["wall_force_limit"] = o.wall_force_factor * out["wall_force_target"]
     return out

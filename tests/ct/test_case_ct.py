@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.spatial import cKDTree
 
 from orchestrator.case import CaseError, load_case
@@ -15,6 +16,7 @@ from orchestrator.frames import Frames
 REPO = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.heavy
 def test_ct_section_runs_and_matches_truth(tmp_path):
     scans = tmp_path / "scans"
     out = subprocess.run([sys.executable, "-m", "orchestrator", "ct", "synth", "--demo", "shear",

@@ -1,5 +1,6 @@
 """End to end through the CLI functions: synth -> segment -> track -> frames.h5 (source ct)."""
 import numpy as np
+import pytest
 import pandas as pd
 from scipy.spatial import cKDTree
 
@@ -16,6 +17,7 @@ def test_assign_ids_lost_and_new():
     assert rows.tolist() == [[0, 1, 2, -1], [1, -1, 0, 2]]
 
 
+@pytest.mark.heavy
 def test_cli_pipeline(tmp_path):
     assert main(["ct", "synth", "--demo", "shear", "--voxel-size", "10 um", "--out", str(tmp_path / "s"),
                  "--hollow", "0.1"]) == 0

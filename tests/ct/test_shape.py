@@ -1,4 +1,6 @@
 """SH expansion (seed 001 eqs. 1-4), rotation invariance, and matching by invariants (Algorithm 1)."""
+import functools
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -47,13 +49,17 @@ def _render_measure(coefs, positions, rotations, noise, seed):
     return out
 
 
+@functools.lru_cache(maxsize=1)
 def _grain_set():
-    """150 irregular grains (SH degree 15, ~14 voxels across) placed without contact in a 128^3 scan."""
+    """150 irregular grains (SH degree 15, ~14 voxels across) placed without contact in a 128^3 scan.
+    Built once for both fixtures below (read-only arrays)."""
     n, L = 150, 128
     coefs = synth.random_sh_grains(n, 7 * VS, seed=8)
     rmax = np.array([synth._GridRadial(c, 15).rmax for c in coefs])
     box = ((VS,) * 3, ((L - 1) * VS,) * 3)
     p0 = synth.pack_spheres(rmax + VS, box=box, seed=9)
+    for a in (*coefs, rmax, p0):
+        a.setflags(write=False)
     return coefs, rmax, box, p0
 
 
@@ -104,11 +110,13 @@ def _invariant_change_and_difference(irregular, pair=(0, 1), label="rotation + n
     return change, differ
 
 
+@pytest.mark.heavy
 def test_rotation_changes_invariants_less_than_any_two_grains_differ(irregular):
     change, differ = _invariant_change_and_difference(irregular)
     assert change.max() < differ.min()                # every rotated grain stays nearest itself
 
 
+@pytest.mark.heavy
 def test_rotation_alone_changes_invariants_far_less_than_grains_differ(rotated_clean):
     """Issue #6's floor for rotation: the same grain at three random orientations, rendered,
     segmented and measured, changes its invariant vector by less than 0.25x the smallest difference
@@ -125,6 +133,7 @@ def test_rotation_alone_changes_invariants_far_less_than_grains_differ(rotated_c
     assert change.max() < 0.5 * differ.min()
 
 
+@pytest.mark.heavy
 def test_rotation_adds_nothing_beyond_scan_noise(irregular):
     """With noise, the change between two scans of a grain is the noise's: turning the grain between
     the scans changes the invariants no more than re-scanning it unturned (within 25 %)."""
@@ -143,11 +152,13 @@ def test_rotation_adds_nothing_beyond_scan_noise(irregular):
     "unbiased surface estimate reaches 0.25x at this noise and grain size (at 4 % noise the same grains "
     "give 0.21x). Strict: this fails the suite "
     "the day it passes, so the marker cannot outlive a fix."))
+@pytest.mark.heavy
 def test_rotation_changes_invariants_far_less_than_grains_differ(irregular):
     change, differ = _invariant_change_and_difference(irregular)
     assert np.median(change) < 0.25 * differ.min()
 
 
+@pytest.mark.heavy
 def test_sh_matching_irregular_grains(irregular):
     (ga, ka), (gb, kb) = irregular["out"][:2]
     cols = _COLS

@@ -31,8 +31,8 @@ def test_rolling_springs_are_the_seeds():
     x50 = case.scene.psd.median
     r_eff = x50 / 4
     k_t = 2 / 7 * 4 / 3 * p["E_eff_pp"] * x50 / 2            # seed §3.2
-    assert c["yade_krot"] == pytest.approx(k_t * r_eff ** 2)
-    assert c["yade_ktwist"] == pytest.approx(k_t * r_eff ** 2)
+    assert c["rolling_stiffness"] == pytest.approx(k_t * r_eff ** 2)
+    assert c["twisting_stiffness"] == pytest.approx(k_t * r_eff ** 2)
     xi = c["expected_overlap"]
     assert c["rolling_coefficient"] * r_eff == pytest.approx(math.sqrt(2 * r_eff * xi))   # seed000 mu_r r_eff
     assert c["torsion_coefficient"] == 0.58
