@@ -24,87 +24,82 @@ if "NUMBA_CACHE_DIR" not in os.environ and not os.access(os.path.dirname(os.path
 import numba  # noqa: E402  (after NUMBA_CACHE_DIR: numba reads it at import)
 
 _P10 = np.array([10.0 ** k for k in range(23)])          # 1e0 .. 1e22: every one an exact double
-_M_MAX = 2 ** 53
 
 
 @numba.njit(cache=True, nogil=True)
 def _kernel(buf, out, p10):
-    """Parse ``buf`` (uint8) into ``out``; returns the number of tokens (stored up to len(out)),
-    or -1 when a token is outside the exact fast path (module docstring)."""
-    n = buf.size
+    """Parse ``buf`` (uint8, ending with a whitespace byte: no end-of-buffer test inside a token)
+    into ``out``; returns the number of tokens (stored up to len(out)), or -1 when a token is
+    outside the exact fast path (module docstring)."""
+    n = buf.size - 1
     size = out.size
     i = 0
     k = 0
     while True:
-        while i < n and (buf[i] == 32 or buf[i] == 10 or buf[i] == 9 or buf[i] == 13):
+        while buf[i] <= 32:                          # space, tab, newline, carriage return
+            if i >= n:
+                return k
             i += 1
-        if i >= n:
-            return k
-        neg = False
         c = buf[i]
-        if c == 45:                                  # '-'
-            neg = True
-            i += 1
-        elif c == 43:                                # '+'
+        neg = c == 45                                # '-'
+        if neg or c == 43:                           # '+'
             i += 1
         m = 0
-        digits = 0                                   # digits of the significand (after a leading zero run)
-        e = 0
-        seen = False
-        while i < n and 48 <= buf[i] <= 57:
-            d = buf[i] - 48
-            if m > 0 or d > 0:
-                digits += 1
+        s = i
+        while True:                                  # integer part
+            d = np.int64(buf[i]) - 48
+            if d < 0 or d > 9:
+                break
             m = m * 10 + d
-            seen = True
             i += 1
-            if digits > 16:
+            if i - s > 18:                           # m would leave int64: general parser
                 return -1
-        if i < n and buf[i] == 46:                   # '.'
+        nd = i - s
+        e = 0
+        if buf[i] == 46:                             # '.': fraction digits
             i += 1
-            while i < n and 48 <= buf[i] <= 57:
-                d = buf[i] - 48
-                if m > 0 or d > 0:
-                    digits += 1
+            f = i
+            while True:
+                d = np.int64(buf[i]) - 48
+                if d < 0 or d > 9:
+                    break
                 m = m * 10 + d
-                e -= 1
-                seen = True
                 i += 1
-                if digits > 16:
+                if nd + i - f > 18:
                     return -1
-        if not seen:
+            e = f - i
+            nd += i - f
+        if nd == 0:
             return -1
-        if i < n and (buf[i] == 101 or buf[i] == 69):   # 'e' / 'E'
+        c = buf[i]
+        if c == 101 or c == 69:                      # 'e' / 'E'
             i += 1
-            eneg = False
-            if i < n and buf[i] == 45:
-                eneg = True
-                i += 1
-            elif i < n and buf[i] == 43:
+            eneg = buf[i] == 45
+            if eneg or buf[i] == 43:
                 i += 1
             x = 0
-            eseen = False
-            while i < n and 48 <= buf[i] <= 57:
-                x = x * 10 + (buf[i] - 48)
-                eseen = True
+            s = i
+            while True:
+                d = np.int64(buf[i]) - 48
+                if d < 0 or d > 9:
+                    break
+                x = x * 10 + d
                 i += 1
-                if x > 100000:
-                    return -1
-            if not eseen:
+            if i == s or i - s > 5:
                 return -1
             e += -x if eneg else x
-        if i < n and not (buf[i] == 32 or buf[i] == 10 or buf[i] == 9 or buf[i] == 13):
+        if buf[i] > 32:
             return -1                                # 'nan', 'inf', '1.5x', an ITEM line ...
         if m >= 9007199254740992:                    # 2^53: m not exact
             return -1
-        if m == 0:
-            v = 0.0
-        elif e == 0:
+        if e == 0:
             v = float(m)
         elif 0 < e <= 22:
             v = float(m) * p10[e]
         elif -22 <= e < 0:
             v = float(m) / p10[-e]
+        elif m == 0:
+            v = 0.0
         else:
             return -1
         if k < size:
@@ -117,7 +112,10 @@ def parse(body: bytes, size: int):
     one is inside the exact fast path; the count found (an int) when it differs; None when a token
     needs the general parser."""
     out = np.empty(size, dtype=np.float64)
-    k = _kernel(np.frombuffer(body, dtype=np.uint8), out, _P10)
+    buf = np.frombuffer(body, dtype=np.uint8)
+    if buf.size == 0 or buf[-1] > 32:                # the kernel needs a trailing whitespace byte
+        buf = np.concatenate([buf, np.array([10], np.uint8)])
+    k = _kernel(buf, out, _P10)
     if k < 0:
         return None
     return out if k == size else k
