@@ -48,6 +48,31 @@ def _frames(run: Path):
     return np.concatenate(st), np.concatenate(sp), None
 
 
+def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int = 10) -> dict:
+    """σ1/σ3 (10-row running means of σ1 and σ3) and the boundary's ε_v at the strains reached, from
+    ``triax.txt`` alone (a run still going: no frames.h5 yet), with the definitions of
+    ``TriaxialScene.post``: σ1 = F_top/(V/H), σ3 = F_lat/A_lat, ε_a and ε_v from the last stage-1 row."""
+    a = np.loadtxt(run / "triax.txt", comments="#", ndmin=2)
+    stage, zb, zt, ftop, flat, area, vol = a[:, 2], a[:, 3], a[:, 4], a[:, 6], a[:, 7], a[:, 8], a[:, 9]
+    if not (stage >= 2).any():
+        return {}
+    i0 = int(np.flatnonzero(stage >= 2)[0]) - 1
+    H = zt - zb
+    s1, s3 = ftop / (vol / H), flat / area
+    from orchestrator.analysis.triaxial import triaxial_curves
+    sl = slice(i0 + 1, None)
+    ea = (H[i0] - H[sl]) / H[i0]
+    ev = (vol[i0] - vol[sl]) / vol[i0]
+    c = triaxial_curves(ea, s1[sl], s3[sl], ev, smoothing_rows=rows)
+    m1, m3 = c["sigma1_smoothed"].to_numpy(), c["sigma3_smoothed"].to_numpy()
+    out = {"axial_strain_reached": float(ea.max())}
+    for e in strains:
+        if ea.max() >= e * (1 - 1e-3):
+            out[f"stress_ratio@{e:g}"] = float(np.interp(e, ea, m1 / m3))
+            out[f"volumetric_strain@{e:g}"] = float(np.interp(e, ea, ev))
+    return out
+
+
 def report(run: Path) -> dict:
     run = Path(run)
     log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
@@ -91,6 +116,7 @@ def report(run: Path) -> dict:
         if load.any():
             out["K_nonaffine_over_U_loading_median"] = float(np.median(kn[load]))
             out["K_nonaffine_over_U_loading_max"] = float(np.max(kn[load]))
+    out["series_figures"] = series_figures(run)
     if (run / "frames.h5").exists() and (run / "case.yaml").exists():
         from orchestrator.case import load_case
         from orchestrator.stability.observables import observables
