@@ -9,24 +9,57 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.optimize import brentq
 from scipy.spatial import cKDTree
+
+
+def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: float, d_max: float,
+                        rng, median: float | None = None) -> np.ndarray:
+    """``n`` diameters [m] with ln d ~ N(``mu_ln``, ``sigma_ln``²) truncated to [``d_min``, ``d_max``]
+    (rejection sampling: the truncated density is the log-normal one renormalised, seed 000 §3.2).
+    The one sampler of the project: :func:`lognormal_diameters` (by median) and the triaxial
+    scene's PSD (by truncated mean, :func:`lognormal_mu_for_mean`) both draw through it. Give
+    ``median`` = exp(mu_ln) [m] instead of ``mu_ln`` (None) to keep a median exact to the last bit."""
+    if not (0 < d_min <= d_max):
+        raise ValueError(f"need 0 < d_min <= d_max, got {d_min}, {d_max}")
+    rng = np.random.default_rng(rng)
+    if sigma_ln == 0:
+        d = math.exp(mu_ln) if median is None else median
+        if not d_min <= d <= d_max:
+            raise ValueError(f"sigma_ln = 0 and the diameter {d} lies outside [{d_min}, {d_max}]")
+        return np.full(n, d)
+    out = np.empty(0)
+    while out.size < n:
+        z = rng.standard_normal(max(2 * (n - out.size), 64))
+        # the same law either way; the two forms differ by an ulp and keep each caller's draws
+        # bit-identical to what it drew before the samplers were folded into one (golden decks)
+        d = np.exp(mu_ln + sigma_ln * z) if median is None else median * np.exp(sigma_ln * z)
+        out = np.concatenate([out, d[(d >= d_min) & (d <= d_max)]])
+    return out[:n]
 
 
 def lognormal_diameters(n: int, median: float, d_min: float, d_max: float, sigma_ln: float,
                         rng) -> np.ndarray:
     """``n`` diameters [m] from a log-normal distribution with median ``median`` [m] and log
-    standard deviation ``sigma_ln`` [-], accepted only within [d_min, d_max] (rejection
-    sampling: the truncated density is the log-normal one renormalised, as in seed 000 §3.2)."""
+    standard deviation ``sigma_ln`` [-], accepted only within [d_min, d_max]
+    (:func:`truncated_lognormal` with mu_ln = ln median)."""
     if not (0 < d_min <= median <= d_max):
         raise ValueError(f"need 0 < d_min <= median <= d_max, got {d_min}, {median}, {d_max}")
-    rng = np.random.default_rng(rng)
-    if sigma_ln == 0:
-        return np.full(n, median)
-    out = np.empty(0)
-    while out.size < n:
-        d = median * np.exp(sigma_ln * rng.standard_normal(max(2 * (n - out.size), 64)))
-        out = np.concatenate([out, d[(d >= d_min) & (d <= d_max)]])
-    return out[:n]
+    return truncated_lognormal(n, None, sigma_ln, d_min, d_max, rng, median=median)
+
+
+def truncated_lognormal_mean(mu_ln: float, sigma_ln: float, d_min: float, d_max: float,
+                             m: int = 4000) -> float:
+    """Number mean [m] of the truncated log-normal (quadrature on m points in ln d)."""
+    x = np.linspace(math.log(d_min), math.log(d_max), m)
+    w = np.exp(-0.5 * ((x - mu_ln) / sigma_ln) ** 2)
+    return float(np.sum(w * np.exp(x)) / np.sum(w))
+
+
+def lognormal_mu_for_mean(mean: float, sigma_ln: float, d_min: float, d_max: float) -> float:
+    """mu_ln such that the log-normal truncated to [d_min, d_max] has number mean ``mean`` [m]."""
+    return brentq(lambda mu: truncated_lognormal_mean(mu, sigma_ln, d_min, d_max) - mean,
+                  math.log(d_min) - 5 * sigma_ln, math.log(d_max) + 5 * sigma_ln)
 
 
 def mean_sphere_volume(median: float, d_min: float, d_max: float, sigma_ln: float,

@@ -52,7 +52,6 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
-from scipy.optimize import brentq
 from scipy.spatial import ConvexHull, cKDTree
 
 from ..atomic import write_json, write_text
@@ -61,6 +60,7 @@ from ..clumps import bounding_radius, equivalent_scale, load_library, mass_prope
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
+from ..psd import lognormal_mu_for_mean, truncated_lognormal
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
@@ -123,12 +123,8 @@ class PSD(Strict):
             u = rng.random(n)
             # uniform in log d inside the bin
             return np.exp(np.log(d[b]) + u * (np.log(d[b + 1]) - np.log(d[b])))
-        mu = _lognormal_mu(self.min, self.max, self.mean, self.spread)
-        out = np.empty(0)
-        while len(out) < n:
-            x = np.exp(rng.normal(mu, self.spread, size=2 * n))
-            out = np.concatenate([out, x[(x >= self.min) & (x <= self.max)]])
-        return out[:n]
+        mu = lognormal_mu_for_mean(self.mean, self.spread, self.min, self.max)
+        return truncated_lognormal(n, mu, self.spread, self.min, self.max, rng)
 
     def mean_diameter(self) -> float:
         """d50 by number (table: by mass) [m], the grain size in the inertial number."""
@@ -137,16 +133,6 @@ class PSD(Strict):
             F = np.array([r[1] for r in self.table])
             return float(np.interp(0.5, F, d))
         return self.mean
-
-
-def _truncated_mean(mu, s, lo, hi, m=4000):
-    x = np.linspace(math.log(lo), math.log(hi), m)
-    w = np.exp(-0.5 * ((x - mu) / s) ** 2)
-    return float(np.sum(w * np.exp(x)) / np.sum(w))
-
-
-def _lognormal_mu(lo, hi, mean, s):
-    return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
 
 
 class Isotropic(Strict):
