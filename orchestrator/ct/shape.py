@@ -207,8 +207,10 @@ def grain_shapes(seg, degree=DEGREE, n_rays=None, labels=None, progress=False):
             continue
         lo = np.array([s.start for s in sl])
         crop = np.where(own[sl] == lab, frac[sl], 0.0).astype(np.float32)
-        rmax = float(np.linalg.norm(np.array(crop.shape))) + 1
-        r = radial_profile(crop, cz[g] - lo, u, rmax)
+        c0 = cz[g] - lo
+        # farthest crop corner + 1 voxel: beyond it the field is 0 (cval), no crossing can lie there
+        rmax = float(np.linalg.norm(np.maximum(np.abs(c0), np.abs(np.array(crop.shape) - 1 - c0)))) + 1
+        r = radial_profile(crop, c0, u, rmax)
         ok = np.isfinite(r)
         if ok.sum() < A.shape[1]:
             continue
