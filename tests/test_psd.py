@@ -49,3 +49,49 @@ def test_triaxial_psd_draws_through_the_same_sampler_and_hits_its_mean():
     assert np.array_equal(d, psd.truncated_lognormal(50_000, mu, 0.25, 0.8e-3, 1.6e-3, np.random.default_rng(3)))
     assert d.min() >= 0.8e-3 and d.max() <= 1.6e-3
     assert np.mean(d) == pytest.approx(1.1e-3, rel=3e-3)
+
+
+# ------------------------------------------------------------------------------------------------
+# the loose packer (random sequential addition) in its two containers
+# ------------------------------------------------------------------------------------------------
+def _min_gap(pos, r, L=None):
+    """Smallest |x_i - x_j| - r_i - r_j over all pairs (minimum image in x, y when L is given)."""
+    d = pos[:, None, :] - pos[None, :, :]
+    if L is not None:
+        d[..., :2] -= L * np.round(d[..., :2] / L)
+    gap = np.linalg.norm(d, axis=-1) - r[:, None] - r[None, :]
+    return gap[np.triu_indices(len(r), 1)].min()
+
+
+def test_rsa_cylinder_inside_no_overlap_target_fraction():
+    rng = np.random.default_rng(1)
+    R, H, clear, phi = 6.0, 12.0, 0.05, 0.25
+    r = rng.uniform(0.4, 0.6, int(phi * np.pi * R ** 2 * H / (4 / 3 * np.pi * 0.5 ** 3 * 1.0)))
+    pos = psd.pack_cylinder(r, R, 0.0, H, 2, wall_clearance=clear)
+    assert np.isfinite(pos).all()                                   # every grain placed
+    assert np.sum(4 / 3 * np.pi * r ** 3) / (np.pi * R ** 2 * H) >= 0.24   # the target fraction, all placed
+    assert np.all(np.hypot(pos[:, 0], pos[:, 1]) + r <= R - clear + 1e-12)
+    assert np.all(pos[:, 2] - r >= clear - 1e-12) and np.all(pos[:, 2] + r <= H - clear + 1e-12)
+    assert _min_gap(pos, r) >= 0.0 and psd.max_overlap(pos, r) == 0.0
+    assert np.array_equal(pos, psd.pack_cylinder(r, R, 0.0, H, 2, wall_clearance=clear))
+
+
+def test_rsa_periodic_box_minimum_image_and_target_fraction():
+    rng = np.random.default_rng(3)
+    L, H, phi = 5.0, 10.0, 0.30                 # 2-5 cells a side: the wrapped neighbour search matters
+    r = rng.uniform(0.4, 0.6, int(phi * L * L * H / (4 / 3 * np.pi * 0.5 ** 3)))
+    pos = psd.pack_box(r, L, 0.0, H, np.random.default_rng(4))
+    assert np.isfinite(pos).all()
+    assert np.sum(4 / 3 * np.pi * r ** 3) / (L * L * H) >= 0.29
+    assert np.all((pos[:, :2] >= 0) & (pos[:, :2] < L))
+    assert np.all(pos[:, 2] - r >= 0) and np.all(pos[:, 2] + r <= H)
+    assert _min_gap(pos, r, L) >= 0.0                               # across the periodic faces too
+
+
+def test_rsa_jams_with_a_clear_error():
+    with pytest.raises(ValueError, match="could not place particle"):
+        psd.pack_cylinder(np.full(500, 1.0), 5.0, 0.0, 5.0, 1)
+    with pytest.raises(ValueError, match="could not place particle"):
+        psd.pack_box(np.full(500, 1.0), 5.0, 0.0, 5.0, 1, max_tries=50)
+    with pytest.raises(ValueError, match="smaller than a particle"):
+        psd.pack_box(np.full(3, 1.0), 5.0, 0.0, 1.5, 1)
