@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 
 def lognormal_diameters(n: int, median: float, d_min: float, d_max: float, sigma_ln: float,
@@ -103,6 +102,7 @@ def max_overlap(position: np.ndarray, radii: np.ndarray) -> float:
     pos = np.asarray(position, dtype=float)
     ok = np.all(np.isfinite(pos), axis=1)
     pos, radii = pos[ok], np.asarray(radii)[ok]
+    from scipy.spatial import cKDTree      # here: scipy.spatial costs ~0.3 s to import (validate, #16)
     tree = cKDTree(pos)
     pairs = tree.query_pairs(2 * radii.max(), output_type="ndarray")
     if len(pairs) == 0:

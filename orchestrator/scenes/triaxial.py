@@ -52,18 +52,35 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
-from scipy.optimize import brentq
-from scipy.spatial import ConvexHull, cKDTree
 
 from ..atomic import write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
+from ..contact_law import remembered
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
+
+
+# scipy.optimize and scipy.spatial are imported on first use: every case load imports this scene,
+# and they cost ~0.6 s (validate within 2 s, #16)
+def brentq(*args, **kwargs):
+    from scipy.optimize import brentq as f
+    return f(*args, **kwargs)
+
+
+def ConvexHull(*args, **kwargs):  # noqa: N802 - scipy's name
+    from scipy.spatial import ConvexHull as f
+    return f(*args, **kwargs)
+
+
+def cKDTree(*args, **kwargs):  # noqa: N802 - scipy's name
+    from scipy.spatial import cKDTree as f
+    return f(*args, **kwargs)
+
 
 #: per-frame controls written to frames.h5 (see module docstring)
 CONTROLS: dict[str, str] = {
@@ -145,6 +162,7 @@ def _truncated_mean(mu, s, lo, hi, m=4000):
     return float(np.sum(w * np.exp(x)) / np.sum(w))
 
 
+@remembered          # a root search (and scipy.optimize's import) per call: kept across processes
 def _lognormal_mu(lo, hi, mean, s):
     return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
 
