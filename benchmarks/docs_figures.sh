@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Regenerate every speed figure quoted in docs/analysis.md and docs/ct.md (one thread each).
-#   bash benchmarks/docs_figures.sh            # both
+# Regenerate every speed figure quoted in docs/speed.md, docs/analysis.md and docs/ct.md (one thread each).
+#   bash benchmarks/docs_figures.sh            # all of them (~1 h on the shared 2-core machine)
 #   bash benchmarks/docs_figures.sh analysis   # docs/analysis.md "Speed"
 #   bash benchmarks/docs_figures.sh ct         # docs/ct.md "Speed" and contact table (512^3 scan cached in scan512.npy)
+#   bash benchmarks/docs_figures.sh dump       # docs/speed.md "Text dump parsing"
+#   bash benchmarks/docs_figures.sh liggghts   # docs/speed.md "LIGGGHTS decks against a bare run" (with --mpi)
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 py="${PYTHON:-python}"
@@ -13,4 +15,10 @@ if [[ "$what" == all || "$what" == analysis ]]; then
 fi
 if [[ "$what" == all || "$what" == ct ]]; then
   "$py" "$here/bench_ct.py" --size 512 --cache "${SCAN_CACHE:-scan512.npy}"
+fi
+if [[ "$what" == all || "$what" == dump ]]; then
+  "$py" "$here/bench_foundation.py" --skip-cases --repeat 7
+fi
+if [[ "$what" == all || "$what" == liggghts ]]; then
+  "$py" "$here/bench_liggghts_speed.py" --steps 3000 --warm 500 --mpi
 fi

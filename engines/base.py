@@ -237,6 +237,7 @@ class Engine(ABC):
                     if not events:
                         if proc.poll() is not None:
                             break
+                        bar.update(step)            # a quiet engine (setup, a long stage) still gets its lines
                         continue
                     chunk = os.read(proc.stdout.fileno(), 65536)
                     if not chunk:
@@ -320,8 +321,9 @@ class _Progress:
     """A rich progress bar with ETA, fed with the engine's step counter; not on a terminal (a log,
     a batch job), one line on stderr every :attr:`EVERY` seconds instead."""
 
-    #: seconds between two progress lines when stderr is not a terminal
-    EVERY = 30.0
+    #: seconds between two progress lines when stderr is not a terminal (ORCHESTRATOR_PROGRESS_EVERY
+    #: overrides it, e.g. for a test or a batch system that wants fewer lines)
+    EVERY = float(os.environ.get("ORCHESTRATOR_PROGRESS_EVERY", "30"))
     #: the ETA extrapolates the rate of the last this many seconds: a run's step rate changes
     #: between stages (a loose packing runs fast, a sheared dense one slowly) and with the load
     #: of the machine, so the mean rate since the start under-estimates the rest
@@ -339,6 +341,8 @@ class _Progress:
         self.next = self.t0 + self.EVERY
         if not sys.stderr.isatty():
             self.lines = True
+            print(f"{label}: started, {total} steps; a progress line every {self.EVERY:.0f} s", file=sys.stderr,
+                  flush=True)
             return
         try:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
@@ -356,15 +360,16 @@ class _Progress:
         elif self.lines:
             import sys
             now = time.perf_counter()
-            if self.first is None:
+            if self.first is None and step > 0:   # the first report (a resumed run starts late)
                 self.first = (now, step)
                 self.samples.append(self.first)
             if now >= self.next:
                 self.next = now + self.EVERY
-                self.samples.append((now, step))
-                while len(self.samples) > 2 and now - self.samples[1][0] >= self.RATE_WINDOW:
-                    self.samples.pop(0)
-                t, s0 = self.samples[0]
+                if self.samples:
+                    self.samples.append((now, step))
+                    while len(self.samples) > 2 and now - self.samples[1][0] >= self.RATE_WINDOW:
+                        self.samples.pop(0)
+                t, s0 = self.samples[0] if self.samples else (now, step)
                 rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
                 eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
                 print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "

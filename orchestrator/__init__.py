@@ -6,10 +6,23 @@ Notebook entry points::
     fr = orc.load("runs/shear_cell_smoke/liggghts-1a2b3c")   # frames as NumPy arrays
     fr[-1].to_dataframe()                                      # one frame as a table
 """
-from .frames import Frame, Frames, FrameWriter, load, write_frames
-
 __all__ = ["Frame", "Frames", "FrameWriter", "load", "write_frames", "load_case"]
 __version__ = "0.1.0"
+
+#: names served from orchestrator.frames on first use: importing it (h5py) costs ~0.4 s, which every
+#: command paid, `validate` included (issue #16: validate within 2 s)
+_FRAMES = ("Frame", "Frames", "FrameWriter", "load", "write_frames")
+
+
+def __getattr__(name):
+    if name in _FRAMES:
+        from . import frames
+        return getattr(frames, name)
+    raise AttributeError(f"module 'orchestrator' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_FRAMES))
 
 
 def load_case(path, overrides=None):

@@ -265,7 +265,7 @@ class Case(Strict):
     @model_validator(mode="after")
     def _default_engines_have_decks(self):
         """A case that names no engines runs on every installed engine that has a deck for its
-        scene (LAMMPS has no shear-cell or triaxial deck yet); named engines are kept as given."""
+        scene (LAMMPS has no triaxial deck yet); named engines are kept as given."""
         if "engines" not in self.model_fields_set:
             kind = getattr(self.scene, "kind", None)
             if kind is not None:

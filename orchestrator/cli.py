@@ -300,6 +300,13 @@ def main(argv=None) -> int:
     """Exit status: 0 done, 1 a run or check that failed, 2 bad input (a case, a path, a file),
     130 interrupted. Every error is one message; ``--debug`` adds the traceback."""
     args = build_parser(argv).parse_args(argv)
+    # off a terminal (`run case > log 2>&1`, a batch job) Python block-buffers stdout: the start line
+    # and the results would reach the log only at exit, after the progress lines on stderr
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(line_buffering=True)
+        except (AttributeError, ValueError):       # a replaced stream (pytest's capture, StringIO)
+            pass
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

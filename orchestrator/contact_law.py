@@ -7,14 +7,76 @@ without importing the derivation that calls it (no import cycle).
 from __future__ import annotations
 
 import functools
+import json
 import math
+import os
+from pathlib import Path
 
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
+# scipy (integrate, optimize: ~0.8 s to import) is imported where an integration is done, and the
+# integrations are remembered across processes (:func:`remembered`): `validate` within 2 s (#16)
 
 
 class DerivationError(ValueError):
     """A case whose derived numbers are unsafe (time step above the critical one, …)."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Remembered integrations
+# ----------------------------------------------------------------------------------------------
+#: bump when a remembered function's numerics change (the stored values are then ignored)
+MEMO_VERSION = 1
+#: the package's table (values for the shipped cases, written by benchmarks/bench_validate.py --memo)
+PACKAGE_MEMO = Path(__file__).resolve().parent / "_data" / "contact_law_memo.json"
+
+
+def memo_path() -> Path:
+    """The user's table of remembered integrations (ORCHESTRATOR_MEMO overrides it)."""
+    if os.environ.get("ORCHESTRATOR_MEMO"):
+        return Path(os.environ["ORCHESTRATOR_MEMO"])
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "orchestrator" / "contact_law_memo.json"
+
+
+@functools.lru_cache(maxsize=1)
+def _memo_prefix() -> str:
+    """Stored values are exact doubles of one scipy version and one MEMO_VERSION."""
+    from importlib.metadata import version
+    return f"v{MEMO_VERSION}/scipy-{version('scipy')}/"
+
+
+def _read_memo(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+@functools.lru_cache(maxsize=1)
+def _memo() -> dict:
+    return {**_read_memo(PACKAGE_MEMO), **_read_memo(memo_path())}
+
+
+def remembered(fn):
+    """A pure function of floats whose result (an exact double: JSON keeps all 17 digits) is kept in
+    the user's table, so a later process skips the integration and scipy's import. A table that
+    cannot be written is no error (the value is computed again next time)."""
+    @functools.wraps(fn)
+    def wrapper(*xs: float) -> float:
+        key = f"{_memo_prefix()}{fn.__module__}.{fn.__name__}({', '.join(repr(float(x)) for x in xs)})"
+        memo = _memo()
+        if key in memo:
+            return float(memo[key])
+        value = float(fn(*xs))
+        memo[key] = value
+        path = memo_path()
+        try:
+            from .atomic import write_text
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_text(path, json.dumps({**_read_memo(path), key: value}, indent=0, sort_keys=True))
+        except OSError:
+            pass
+        return value
+    return wrapper
 
 
 # ----------------------------------------------------------------------------------------------
@@ -121,12 +183,14 @@ def _clipped_restitution(force) -> float:
         return y[0]
     left.terminal = True
     left.direction = -1
+    from scipy.integrate import solve_ivp
     sol = solve_ivp(rhs, (0, 50), [1e-12, 1.0], events=[zero_force, left], rtol=1e-10, atol=1e-13,
                     max_step=0.01)
     return float(-sol.y[1, -1])
 
 
 @functools.lru_cache(maxsize=256)
+@remembered
 def restitution_input(e_target: float) -> float:
     """The restitution to feed a Tsuji law whose tensile force is clipped (engines with
     ``limitForce``/``limit_damping``) so that a collision delivers ``e_target``; raises
@@ -135,6 +199,7 @@ def restitution_input(e_target: float) -> float:
         return 1.0
     f = lambda e_in: delivered_restitution(round(e_in, 12)) - e_target
     lo, hi = 1e-4, 1.0 - 1e-9
+    from scipy.optimize import brentq
     if f(lo) > 0:
         raise DerivationError(f"restitution {e_target} is below what Tsuji damping with clipping can deliver "
                               f"({delivered_restitution(lo):.3f})")
@@ -154,6 +219,13 @@ def sqrt_damping_gamma(e_target: float, m_eff: float, R_eff: float, E_eff: float
     (as the ratio of damping to elastic force grows like v^(1/5)): it is exact only at ``v``."""
     if e_target >= 1.0:
         return 0.0
-    b = brentq(lambda b: _sqrt_damping_restitution(round(b, 12)) - e_target, 1e-9, 50.0, xtol=1e-12)
+    b = _sqrt_damping_b(e_target)
     d0 = hertz_max_overlap(m_eff, R_eff, E_eff, v)
     return b * v / (d0 * math.sqrt(R_eff * d0))
+
+
+@remembered
+def _sqrt_damping_b(e_target: float) -> float:
+    """The dimensionless damping b of :func:`_sqrt_damping_restitution` that delivers ``e_target``."""
+    from scipy.optimize import brentq
+    return float(brentq(lambda b: _sqrt_damping_restitution(round(b, 12)) - e_target, 1e-9, 50.0, xtol=1e-12))

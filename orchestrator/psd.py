@@ -9,8 +9,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
-from scipy.spatial import cKDTree
 
 
 def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: float, d_max: float,
@@ -58,6 +56,7 @@ def truncated_lognormal_mean(mu_ln: float, sigma_ln: float, d_min: float, d_max:
 
 def lognormal_mu_for_mean(mean: float, sigma_ln: float, d_min: float, d_max: float) -> float:
     """mu_ln such that the log-normal truncated to [d_min, d_max] has number mean ``mean`` [m]."""
+    from scipy.optimize import brentq      # here: scipy.optimize costs ~0.3 s to import (validate, #16)
     return brentq(lambda mu: truncated_lognormal_mean(mu, sigma_ln, d_min, d_max) - mean,
                   math.log(d_min) - 5 * sigma_ln, math.log(d_max) + 5 * sigma_ln)
 
@@ -172,6 +171,7 @@ def max_overlap(position: np.ndarray, radii: np.ndarray) -> float:
     pos = np.asarray(position, dtype=float)
     ok = np.all(np.isfinite(pos), axis=1)
     pos, radii = pos[ok], np.asarray(radii)[ok]
+    from scipy.spatial import cKDTree      # here: scipy.spatial costs ~0.3 s to import (validate, #16)
     tree = cKDTree(pos)
     pairs = tree.query_pairs(2 * radii.max(), output_type="ndarray")
     if len(pairs) == 0:

@@ -24,8 +24,8 @@ from engines.render import templates_hash
 
 from .atomic import write_json, write_text
 from .case import Case
-from .clock import estimate_engine_time
 from .derive import derive
+from .sizing import estimate_wall_time  # noqa: F401  (re-exported)
 from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
 from .params import Params, thaw
@@ -118,21 +118,6 @@ def _lock_held(run_dir: Path) -> bool:
             return True
         fcntl.flock(fh, fcntl.LOCK_UN)
     return False
-
-
-def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
-    """Engine wall time [s] estimated from the derived step count and particle count with the cost
-    model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps (a + b n)
-    / S(workers) per engine and scene); an engine or scene never measured falls back to the adapter's
-    bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck runs."""
-    eng = get_engine(engine_name)
-    sc = params["scene"]
-    n = sc.get("n", len(sc.get("ids", [])))
-    steps = sc.get("total_steps", sc["steps"])
-    t, _basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
-    if t == t:         # not NaN: a measured model
-        return t
-    return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case))
 
 
 def prepare(case: Case, engine_name: str, run_dir: Path, params: Params | None = None) -> tuple[Params, list]:
@@ -337,7 +322,8 @@ def drop_resume_points(run_dir: Path) -> int:
     reused, never resumed; on the seed triaxial case they would hold ~60 x 6 MB). Returns the bytes
     freed."""
     freed = 0
-    for f in [*Path(run_dir).glob("restart/*.restart"), *Path(run_dir).glob("checkpoint*.yade.gz"),
+    for f in [*Path(run_dir).glob("restart/*.restart"), *Path(run_dir).glob("restart/*.restart.partial"),
+              *Path(run_dir).glob("checkpoint*.yade.gz"),
               *Path(run_dir).glob("restart_forced_*")]:       # LIGGGHTS' own restart when killed
         try:
             freed += f.stat().st_size

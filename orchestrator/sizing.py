@@ -48,7 +48,6 @@ def frame_count(params: dict) -> int:
 def estimate(case, params: dict, engine: str) -> dict:
     """Size of one run: ``particles``, ``steps``, ``frames``, ``memory_bytes`` (the larger of the
     engine and the parse), ``disk_bytes`` (frames.h5), ``engine_time_s``."""
-    from .runner import estimate_wall_time
     sc = params["scene"]
     n = int(sc.get("n", len(sc.get("ids", []))))
     steps = int(sc.get("total_steps", sc["steps"]))
@@ -117,3 +116,20 @@ def check_fits(case, size: dict, force: bool = False) -> list[str]:
                         "distribution) or give --force to run it anyway")
     return [p for p in probs if p.startswith("warning:")] + (["warning: forced past: " + "; ".join(hard)]
                                                              if hard else [])
+
+
+def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
+    """Engine wall time [s] estimated from the derived step count and particle count with the cost
+    model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps (a + b n)
+    / S(workers) per engine and scene); an engine or scene never measured falls back to the adapter's
+    bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck runs."""
+    from .clock import estimate_engine_time
+    from .registry import get_engine
+    eng = get_engine(engine_name)
+    sc = params["scene"]
+    n = sc.get("n", len(sc.get("ids", [])))
+    steps = sc.get("total_steps", sc["steps"])
+    t, _basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
+    if t == t:         # not NaN: a measured model
+        return t
+    return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case))

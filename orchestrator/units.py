@@ -6,12 +6,37 @@ common, silent error), except ``0``, which is zero in every unit.
 """
 from __future__ import annotations
 
+import functools
+import sys
 from typing import Annotated
 
-import pint
 from pydantic import BeforeValidator, PlainSerializer
 
-ureg = pint.UnitRegistry()
+
+@functools.lru_cache(maxsize=1)
+def registry():
+    """pint's unit registry, made on first use. Import cost (validate within 2 s, #16): pint's
+    optional dask support is not loaded (orchestrator has no dask quantities; ~0.2 s), and the
+    parsed unit definitions come from pint's own cache (``cache_folder=":auto:"``; ~0.3 s), or are
+    parsed afresh when it cannot be used."""
+    block = "dask" not in sys.modules
+    if block:
+        sys.modules["dask"] = None                 # pint.compat: `import dask` -> ImportError
+    try:
+        import pint
+    finally:
+        if block:
+            sys.modules.pop("dask", None)
+    try:
+        return pint.UnitRegistry(cache_folder=":auto:")
+    except Exception:                              # noqa: BLE001 - an unwritable cache: parse afresh
+        return pint.UnitRegistry()
+
+
+def __getattr__(name):
+    if name == "ureg":
+        return registry()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: pint dimensionality and the SI unit each quantity kind is stored in.
 KINDS = {
@@ -50,6 +75,8 @@ def to_si(value, kind: str) -> float:
         raise UnitError(f"{value!r} has no unit; write it with one, e.g. '{value} {si}' (like '{example}')")
     if not isinstance(value, str):
         raise UnitError(f"expected a {kind} string with a unit such as '{example}', got {type(value).__name__}")
+    ureg = registry()
+    pint = sys.modules["pint"]
     try:
         q = ureg.Quantity(value.strip())
     except Exception as exc:  # pint raises several kinds

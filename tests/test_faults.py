@@ -320,3 +320,91 @@ def test_same_case_started_three_times_at_once(tmp_path, engines_installed):
     assert sum("reused" in o for o, _, _ in outs) == 2, [o for o, _, _ in outs]
     (run,) = runs.glob("*/liggghts-*")
     assert json.loads((run / "summary.json").read_text())["status"] == "complete"
+
+
+@pytest.mark.engine
+def test_progress_reaches_a_redirected_log_while_the_engine_runs(tmp_path, engines_installed):
+    """`orchestrator run case > log 2>&1`: the start line (sizing) and progress lines are in the log
+    while the engine still runs (issue #16 item 6; stdout was block-buffered off a terminal, so the
+    start line only arrived at exit). The 30 s period is shortened to 2 s for the test."""
+    log = tmp_path / "run.log"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", str(SMOKE), "--engine", "liggghts",
+                                 "--runs", str(tmp_path / "runs"), "--no-report"], stdout=fh, stderr=subprocess.STDOUT,
+                                env=dict(os.environ, ORCHESTRATOR_PROGRESS_EVERY="2"), start_new_session=True)
+    try:
+        seen, t0 = "", time.time()
+        while time.time() - t0 < 600 and proc.poll() is None:
+            seen = log.read_text()
+            if "particles" in seen and " step " in seen and "%" in seen:
+                break
+            time.sleep(0.5)
+        alive = proc.poll() is None
+    finally:
+        proc.wait(timeout=900)
+    assert alive, f"the run ended before its log showed a start and a progress line:\n{seen}"
+    assert "shear_cell_smoke: 228 particles" in seen, seen          # the start line, with the sizing
+    assert "liggghts shear_cell_smoke: step " in seen, seen          # a progress line
+
+
+def test_remembered_integrations_equal_a_fresh_computation():
+    """The package's table of remembered integrations (orchestrator/_data/contact_law_memo.json,
+    benchmarks/bench_validate.py --memo) holds exactly what the functions compute today: a change
+    to their numerics without a new MEMO_VERSION fails here."""
+    import importlib
+    import inspect
+    from orchestrator import contact_law
+    table = json.loads(contact_law.PACKAGE_MEMO.read_text())
+    mine = {k: v for k, v in table.items() if k.startswith(contact_law._memo_prefix())}
+    assert mine, "no entries for this scipy: regenerate with benchmarks/bench_validate.py --memo"
+    for key, value in mine.items():
+        call = key[len(contact_law._memo_prefix()):]
+        qual, args = call.split("(", 1)
+        module, name = qual.rsplit(".", 1)
+        fn = inspect.unwrap(getattr(importlib.import_module(module), name))
+        got = float(fn(*[float(x) for x in args.rstrip(")").split(", ")]))
+        assert got == value, f"{call}: table {value!r}, computed {got!r}"
+
+
+def test_segments_end_at_the_restart_steps_and_a_resumed_deck_is_the_same_text(tmp_path):
+    """Exact resume by segments (docs/engines.md, Resume): a LIGGGHTS deck's segments end at the
+    multiples of restart_every; the deck resumed from one restart is the full deck's text from that
+    segment on (its `clear` aside); YADE scripts stop at the same steps."""
+    import re
+    from engines import get_engine
+    from engines.liggghts.segments import deck_segments
+    from engines.yade_runtime.series import stop_steps
+    from orchestrator.case import load_case
+    from orchestrator.runner import prepare
+    segs = deck_segments(100, 30)
+    assert [(s["start"], s["stop"], s["last"]) for s in segs] == [(0, 30, False), (30, 60, False), (60, 90, False),
+                                                                  (90, 100, True)]
+    assert [s["dump_file"] for s in segs] == ["frames.bin"] + [f"frames.{k:012d}.bin" for k in (30, 60, 90)]
+    assert [s["start"] for s in deck_segments(100, 30, start=60)] == [60, 90]
+    assert stop_steps([{"step": 0}, {"step": 45}, {"step": 100}], 30) == [0, 30, 45, 60, 90, 100]
+
+    def from_segment(text, s):
+        rest = text[text.index(f"# === segment {s}-"):].split("\n", 1)[1]
+        return rest[len("clear\n"):] if rest.startswith("clear\n") else rest
+
+    for name in ("shear_cell_smoke", "plane_shear_smoke"):
+        case = load_case(CASES / f"{name}.yaml")
+        eng = get_engine("liggghts")
+        params, _ = prepare(case, "liggghts", tmp_path / name)
+        full = eng.render(case, params, tmp_path / name).read_text()
+        every, steps = params["scene"]["restart_every"], params["scene"]["steps"]
+        cuts = [int(s) for s in re.findall(r"^write_restart\s+restart/state\.(\d+)\.restart\.partial", full, re.M)]
+        assert cuts == list(range(every, steps, every))
+        assert "restart " + str(every) not in full            # no periodic restarts inside a segment
+        s = cuts[len(cuts) // 2]
+        resumed = eng.render(case, params, tmp_path / name, resume={"step": s, "restart_file": f"restart/state.{s}.restart"})
+        assert from_segment(resumed.read_text(), s) == from_segment(full, s)
+
+
+def test_yade_wall_rows_a_later_segment_wrote_again_are_taken_once(tmp_path):
+    """A YADE segment file may hold rows past the checkpoint the next segment starts from (killed
+    between its flush and the checkpoint): those rows come from the later file, once."""
+    from engines.yade.output import wall_rows
+    np.save(tmp_path / "walls.yade.000000000000.npy", np.array([[10.0, 1], [20, 2], [30, 3]]))
+    np.save(tmp_path / "walls.yade.000000000020.npy", np.array([[30.0, 3], [40, 4]]))
+    assert wall_rows(tmp_path)[:, 0].tolist() == [10, 20, 30, 40]

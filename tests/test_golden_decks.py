@@ -38,6 +38,7 @@ CASES = [
     ("verification/chung_ooi_1_sphere_sphere_glass.yaml", "lammps"),
     ("verification/chung_ooi_4_oblique.yaml", "lammps"),
     ("plane_shear_smoke.yaml", "lammps"),
+    ("shear_cell_smoke.yaml", "lammps"), ("shear_cell_small.yaml", "lammps"),
 ]
 
 #: files written by render/prepare whose content is data, summarised by a hash

@@ -66,7 +66,8 @@ def test_smoke_ladder_l0_on_both_engines(tmp_path):
     grains: mu_macro is noise), but the packing's compression is: the final piston height and the
     band position must agree within the L0 floor (5 %)."""
     from orchestrator.compare.ladder import run_ladder
-    res = run_ladder(CASES / "shear_cell_smoke.yaml", seeds=[1], runs_root=tmp_path, workers=1, rungs=["L0"])
+    res = run_ladder(CASES / "shear_cell_smoke.yaml", engines=["liggghts", "yade"], seeds=[1], runs_root=tmp_path,
+                     workers=1, rungs=["L0"])
     assert set(res.runs["status"]) == {"complete"}, res.runs[["engine", "status", "error"]]
     comp = res.comparison.set_index("observable")
     for obs in ("mu_macro", "piston_z", "shearband_z", "shearband_width", "density_profile"):

@@ -138,11 +138,12 @@ def test_stress_output_is_refused_with_the_field_named(tmp_path):
 
 
 def test_a_case_naming_no_engines_runs_where_a_deck_exists():
-    """Default engines: every installed engine with a deck for the scene (LAMMPS has no shear-cell
-    or triaxial deck); engines a case names are kept."""
+    """Default engines: every installed engine with a deck for the scene (LAMMPS has no triaxial
+    deck); engines a case names are kept."""
     from orchestrator.case import load_case
     CASES = Path(__file__).resolve().parents[1] / "cases"
-    assert load_case(CASES / "shear_cell_smoke.yaml").engines == ["liggghts", "yade"]
+    assert load_case(CASES / "shear_cell_smoke.yaml").engines == ["lammps", "liggghts", "yade"]
+    assert load_case(CASES / "triaxial_smoke.yaml").engines == ["liggghts", "yade"]
     assert "lammps" in load_case(CASES / "plane_shear_smoke.yaml").engines
     assert load_case(CASES / "triaxial_smoke.yaml", overrides={"engines": ["lammps"]}).engines == ["lammps"]
 

@@ -30,10 +30,10 @@ from orchestrator.registry import get_scene
 from ..base import Engine, EngineError, UnsupportedFeature, tail
 from ..lammps_dump import per_atom_arrays, read_binary_dump, truncate_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
-from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
+from ..liggghts.adapter import DumpOutput, cut_wall_series, dump_columns, write_data_file
 from ..liggghts.segments import dump_segments
 from ..render import render_template
-from .numbers import lammps_numbers
+from .numbers import lammps_numbers, shear_cell_law, shear_cell_regions
 
 #: frames.h5 fields the LAMMPS decks dump (no stress yet: refused in render)
 FRAME_FIELDS = ("position", "velocity", "angular_velocity", "force", "torque")
@@ -70,8 +70,24 @@ class Lammps(Engine):
         "plane_wall": "fix wall/gran granular ... zplane",
         "periodic": "boundary p",
         "rolling_friction": "rolling sds: k_r = k_t (torque k_t R*^2 per radian), limit mu_r R* F_ncrit (plane shear)",
+        "adhesion": "dmt: F = 4/3 E* sqrt(R*) d^3/2 - 4 pi gamma R*, gamma = F_adh/(4 pi <r_eff>): the seed's "
+                    "F_adh r_eff/<r_eff> for every pair",
+        "rotating_walls": "region ... rotate v_theta with fix wall/gran/region (wall velocity from the region's motion)",
+        "servo_wall": "region ... move NULL NULL v_dz: the piston's z is a marker atom moved by fix move with the "
+                      "equal-style servo velocity (kept in restart files)",
     }
     substitutes = {
+        "seed000_damping": {
+            "viscoelastic_median_pair": "damping viscoelastic with eta_n0 = gamma_n/(m* sqrt(R*)) of the median pair: "
+                                        "the seed's gamma_n sqrt(xi) xi_dot for that pair, sqrt(m* R*/(m*50 R*50)) "
+                                        "times it for others (docs/lammps.md)",
+            "tsuji_restitution": "damping coeff_restitution with the e_n the seed's gamma_n delivers at the scene's "
+                                 "characteristic speed (as LIGGGHTS and YADE)",
+        },
+        "mesh_walls": {
+            "region_walls": "fix wall/gran/region on block, cylinder and plane regions: the shear cell's vanes are the "
+                            "STL's boxes, its plates, flanges and sidewall true circles for the STL's polygons",
+        },
         "rolling_friction_load": {
             "sds_constant": "rolling sds with a constant mu_r = sqrt(2 r_eff xi)/r_eff at the expected overlap "
                             "(the seed's lever arm sqrt(2 r_eff xi) grows with the load)",
@@ -107,8 +123,14 @@ class Lammps(Engine):
 
     # -- numbers ----------------------------------------------------------------------------
     def engine_params(self, case, params):
-        """:func:`engines.lammps.numbers.lammps_numbers`, frozen."""
-        return freeze(lammps_numbers(params, case))
+        """:func:`engines.lammps.numbers.lammps_numbers`, and for the shear cell its contact law
+        (:func:`~engines.lammps.numbers.shear_cell_law`) and wall regions
+        (:func:`~engines.lammps.numbers.shear_cell_regions`), frozen."""
+        out = lammps_numbers(params, case)
+        if case.scene.kind == "shear_cell":
+            out["shear_cell"] = shear_cell_law(params, case, self._damping_choice(case, params))
+            out["regions"] = shear_cell_regions(params, case)
+        return freeze(out)
 
     # -- render -----------------------------------------------------------------------------
     def render(self, case, params, run_dir: Path, resume=None) -> Path:
@@ -138,6 +160,17 @@ class Lammps(Engine):
         deck = run_dir / ("resume.in" if resume else "deck.in")
         render_template(f"lammps/{case.scene.kind}.in.j2", ctx, deck)
         return deck
+
+    def _damping_choice(self, case, params) -> str:
+        """The mechanism of seed 000's damping in this case: the substitute the case accepts for
+        ``seed000_damping`` (``viscoelastic_median_pair`` or ``tsuji_restitution``), or
+        ``restitution`` when the case asks for a restitution coefficient."""
+        if "seed000_damping" not in params["features"]:
+            return "restitution"
+        subs = case.contact.substitutes
+        choice = subs.get(f"{self.name}.seed000_damping", subs.get("seed000_damping"))
+        # a choice LAMMPS does not offer is refused by check() before the deck is rendered
+        return choice if choice in self.substitutes["seed000_damping"] else "tsuji_restitution"
 
     def command(self, deck: Path, case) -> list[str]:
         # -nonbuf: unbuffered screen output, so a failure's ERROR line reaches the log;
@@ -189,13 +222,15 @@ class Lammps(Engine):
                 "candidates": [f"restart/{f.name}" for f in reversed(files)]}
 
     def prepare_resume(self, run_dir: Path, resume: dict):
-        """Cut every frame segment back to the restart step: the resumed run writes a new
-        segment from there."""
+        """Cut every frame segment and wall series back to the restart step: the resumed run
+        writes a new segment and a new ``walls.<step>.txt`` from there (rows the killed run wrote
+        after the restart step would otherwise be read as well)."""
         cols = Path(run_dir) / "dump" / "columns.json"
         n = len(json.loads(cols.read_text())) if cols.exists() else None
         for seg in dump_segments(run_dir):
             if truncate_binary_dump(seg, n, resume["step"]) == 0:
                 seg.unlink()
+        cut_wall_series(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:

@@ -142,3 +142,137 @@ def seed_law_numbers(E: float, nu: float, rho: float, d50: float, f_adh: float, 
     xgt = 2.0 * math.sqrt(kt * m_eff) / (eta * m_eff * math.sqrt(R_eff * overlap))
     return {"E": E, "nu": nu, "eta_n0": eta, "surface_energy": f_adh / (4.0 * math.pi * d50 / 4.0),
             "kt": kt, "xgt": xgt, "xgt_overlap": overlap, "mu": mu, "E_eff": E_eff}
+
+
+def shear_cell_law(params: dict, case, damping: str) -> dict:
+    """``pair_coeff`` and wall-fix numbers of the shear cell (seed 000 §3.2-3.3) on
+    ``pair_style granular``. ``damping``: the mechanism chosen for ``seed000_damping``
+    (``viscoelastic_median_pair`` or ``tsuji_restitution``), or ``restitution`` for a case
+    that asks for a restitution coefficient.
+
+    Grain-grain, seed law (``viscoelastic_median_pair``): ``dmt E η_n0 ν γ`` (or ``hertz/material``
+    without adhesion) with γ = F_adh/(4π⟨r_eff⟩) (exact per pair), ``damping viscoelastic`` with
+    the median pair's η_n0 = γ_n/(m*√R*) (:func:`viscoelastic_eta`), ``tangential linear_history``
+    with the seed's k_t = 2/7 · 4/3 E* x50/2 and dashpot 2√(k_t m*) matched at the expected
+    overlap ξ_σ of the scene (LAMMPS scales the tangential damping with the normal one), rolling
+    and twisting ``sds`` (:func:`rolling_twisting`). Otherwise the verification chain
+    (Hertz-Mindlin, ``damping coeff_restitution``) with ``dmt`` when there is adhesion.
+
+    Particle-wall (seed §3.3: the visco-elastic part of eq. 1 only): Hertz with E' = 2(1-ν²)E*_pw
+    (:func:`wall_young`), the same damping form (viscoelastic: η_n0 of a median grain against a
+    flat wall, m* = m50, R* = x50/2), no adhesion, rolling or twisting; Coulomb μ = ``wall_mu``
+    (0 unless ``scene.wall_friction``)."""
+    mat, sc = params["material"], params["scene"]
+    c = sc["contact"]
+    x50 = case.scene.psd.median
+    rho = mat["rho"]
+    r50 = x50 / 2.0
+    m50 = rho * 4.0 / 3.0 * math.pi * r50 ** 3
+    E_pp, E_pw = params["E_eff_pp"], params["E_eff_pw"]
+    f_adh = c.get("adhesion_force", 0.0)
+    gamma = f_adh / (4.0 * math.pi * c["r_eff_mean"]) if f_adh > 0 else 0.0
+    out = {"damping": damping, "surface_energy": gamma, "wall_mu": sc["wall_mu"],
+           **rolling_twisting(c, x50, rho)}
+    if damping == "viscoelastic_median_pair":
+        m_eff, R_eff = m50 / 2.0, r50 / 2.0
+        eta = viscoelastic_eta(seed_gamma_n(E_pp, m_eff), m_eff, R_eff)
+        kt = c["kt_seed"]
+        xi = c["expected_overlap"]
+        xgt = 2.0 * math.sqrt(kt * m_eff) / (eta * m_eff * math.sqrt(R_eff * xi))
+        out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": eta, "tangential": "linear_history",
+                       "kt": kt, "xgt": xgt, "mu": params["friction"], "damping_model": "viscoelastic"}
+        eta_w = viscoelastic_eta(seed_gamma_n(E_pw, m50), m50, r50)
+        out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": eta_w,
+                       "damping_model": "viscoelastic"}
+    else:
+        d = restitution_damping({"restitution": {"target": c["restitution"]["target"]}})
+        model = "coeff_restitution" + (" limit_damping" if d["limit_damping"] else "")
+        out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": d["e_input"], "tangential": "mindlin",
+                       "kt": 8.0 * params["G_eff_pp"], "xgt": tangential_damping_factor(E_pp, params["G_eff_pp"]),
+                       "mu": params["friction"], "damping_model": model}
+        out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": d["e_input"],
+                       "damping_model": model}
+    if out["wall_mu"] > 0:
+        out["wall"].update({"tangential": "mindlin", "kt": 8.0 * params["G_eff_pw"],
+                            "xgt": tangential_damping_factor(E_pw, params["G_eff_pw"]), "mu": out["wall_mu"]})
+    else:
+        out["wall"].update({"tangential": "linear_nohistory", "kt": None, "xgt": 0.0, "mu": 0.0})
+    return out
+
+
+def shear_cell_regions(params: dict, case) -> dict:
+    """The shear cell's walls as LAMMPS regions (``units box``), from the same numbers as the STL
+    meshes (:func:`orchestrator.scenes.shear_cell.build_meshes`, ``orchestrator.geometry.vaned_piston``):
+
+    - each piston: its plate (a cylinder of the piston radius R_p, ``side out``), the flange face
+      that closes the gap pocket (a plane at half the plate thickness behind the face: the flange
+      shell spans [-t_p - t_f, -t_p/2] and leaves no room for a grain beside it), and six vanes, each
+      the STL's box r ∈ [r_in, x_out], |y| ≤ t/2, z ∈ [-t_p/2, h_v] turned by 60° k (upper: +30°);
+    - the sidewall: a cylinder of radius R (``side in``) over the can's height.
+
+    The vanes are the STL's boxes exactly; the plate, flange and sidewall are true circles where
+    the STL has ``segments``-gons with their vertices on the circle."""
+    s = case.scene
+    g = params["scene"]["geometry"]
+    tp, vh, t = s.plate_thickness, s.vane_height, s.vane_thickness
+    embed = 0.5 * tp
+    zu = g["z_upper_face"]
+    vane = lambda z0, z1: [g["vane_inner_radius"], g["vane_outer"], -t / 2, t / 2, z0, z1]
+    return {
+        "R": g["R_cyl"], "R_piston": g["R_piston"], "z_can": g["z_can"],
+        "lower": {"floor_z": -tp / 2, "plate_z": [-tp, 0.0], "vane": vane(-embed, vh),
+                  "angles": [2 * math.pi * k / 6 for k in range(6)],
+                  "names": ["l_floor", "l_plate"] + [f"l_vane{k}" for k in range(6)]},
+        "upper": {"ceiling_z": zu + tp / 2, "plate_z": [zu, zu + tp], "vane": vane(zu - vh, zu + embed),
+                  "angles": [math.pi / 6 + 2 * math.pi * k / 6 for k in range(6)],
+                  "names": ["u_ceil", "u_plate"] + [f"u_vane{k}" for k in range(6)]},
+        # the servo's marker atom: outside the sidewall (distance from the axis sqrt(2)(R + d_max/2)),
+        # inside the box (the box reaches R + 2 d_max)
+        "marker_xy": g["R_cyl"] + 0.5 * s.psd.d_max,
+    }
+
+
+def polygon_area_deficit(segments: int) -> float:
+    """1 − A(inscribed regular ``segments``-gon)/A(circle) [-]: the STL's circles against LAMMPS'."""
+    return 1.0 - segments / (2 * math.pi) * math.sin(2 * math.pi / segments)
+
+
+def shear_cell_geometry_difference(case, params: dict, meshes: dict) -> dict:
+    """The LAMMPS walls (:func:`shear_cell_regions`) against the STL meshes the other engines get
+    (``meshes``: :func:`orchestrator.scenes.shear_cell.build_meshes`, passed in: engines do not
+    import scenes), measured on the meshes: ratios STL/LAMMPS
+    of the sidewall's enclosed volume, a piston plate's volume, the six vanes' volume, the annulus
+    the vanes sweep when turning (π(r_out² − r_in²) h_v, r_out the farthest vane vertex from the axis)
+    and the gap pocket's cross-section (sidewall polygon minus plate polygon)."""
+    import numpy as np
+
+    from orchestrator.geometry.mesh import Mesh
+
+    s = case.scene
+    g = params["scene"]["geometry"]
+    reg = shear_cell_regions(params, case)
+    lower = meshes["lower"]
+
+    def shell(m, k):
+        a, b = m.shells[k]
+        return Mesh(m.vertices, m.triangles[a:b], [(0, b - a)])
+
+    plate, vanes = shell(lower, 0), [shell(lower, k) for k in range(2, len(lower.shells))]
+    R, Rp, tp, vh = g["R_cyl"], g["R_piston"], s.plate_thickness, s.vane_height
+    z0, z1 = g["z_can"]
+    vb = reg["lower"]["vane"]
+    box_volume = (vb[1] - vb[0]) * (vb[3] - vb[2]) * (vb[5] - vb[4])
+    r_out_stl = max(float(np.hypot(*m.vertices[m.triangles.ravel()][:, :2].T).max()) for m in vanes)
+    r_out_lmp = math.hypot(vb[1], vb[3])           # the block's outer corner
+    swept = lambda r_out: math.pi * (r_out ** 2 - vb[0] ** 2) * vh
+    n = g["segments"]
+    poly = lambda r: 0.5 * n * r * r * math.sin(2 * math.pi / n)
+    return {
+        "segments": n,
+        "sidewall_volume": meshes["cylinder"].volume() / (math.pi * R * R * (z1 - z0)),
+        "plate_volume": plate.volume() / (math.pi * Rp * Rp * tp),
+        "vane_volume": sum(m.volume() for m in vanes) / (len(vanes) * box_volume),
+        "vane_swept_volume": swept(r_out_stl) / swept(r_out_lmp),
+        "pocket_area": (poly(R) - poly(Rp)) / (math.pi * (R * R - Rp * Rp)),
+        "sagitta_over_r_min": R * (1 - math.cos(math.pi / n)) / (s.psd.d_min / 2),
+    }

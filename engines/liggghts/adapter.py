@@ -30,7 +30,7 @@ from ..lammps_dump import COLUMNS, per_atom_arrays, read_binary_dump, stress_ten
 from ..render import render_template
 from . import triaxial
 from .numbers import liggghts_numbers, seed_term_ratios
-from .segments import dump_segments, wall_rows
+from .segments import deck_segments, dump_segments, wall_rows
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
@@ -148,6 +148,7 @@ class Liggghts(Engine):
         }
         ctx["dump_columns"] = dump_columns(case)
         ctx["dump_file"] = f"frames.{resume['step']:012d}.bin" if resume else "frames.bin"
+        ctx["segments"] = deck_segments(sc["steps"], ctx["restart_every"], resume["step"] if resume else 0)
         write_json(run_dir / "dump" / "columns.json", ctx["dump_columns"])
         deck = run_dir / ("resume.in" if resume else "deck.in")
         render_template(f"liggghts/{case.scene.kind}.in.j2", ctx, deck)

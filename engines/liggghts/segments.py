@@ -29,3 +29,16 @@ def _number(name: str) -> int:
     """The integer between the first two dots of a file name (-1 when there is none)."""
     part = name.split(".")[1] if name.count(".") >= 2 else ""
     return int(part) if part.isdigit() else -1
+
+
+def deck_segments(steps: int, restart_every: int, start: int = 0) -> list[dict]:
+    """The segments a shear cell or plane shear deck runs in (templates/liggghts/partials/segments.j2):
+    from ``start`` (0, or the restart step a resumed run starts from) to the end, cut at every
+    multiple of ``restart_every``; each writes the frames of its own steps into
+    ``dump/frames.bin`` (the first segment of a fresh run) or ``dump/frames.<start>.bin``, and
+    ends with the restart the next one starts from."""
+    cuts = [s for s in range(restart_every, steps, restart_every) if s > start]
+    bounds = [start, *cuts, steps]
+    return [{"start": a, "stop": b, "last": b == steps,
+             "dump_file": "frames.bin" if a == 0 else f"frames.{a:012d}.bin"}
+            for a, b in zip(bounds[:-1], bounds[1:])]

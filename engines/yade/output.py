@@ -24,7 +24,14 @@ def wall_rows(run_dir) -> np.ndarray | None:
     """Rows of the script's wall sampler (``walls.yade.<n>.npy``, one file per run segment), in
     numeric file order, or None when there are none."""
     files = sorted(Path(run_dir).glob("walls.yade.*.npy"), key=lambda p: int(p.name.split(".")[2]))
-    rows = [a for a in (np.load(f) for f in files) if a.size]
+    starts = [int(f.name.split(".")[2]) for f in files]
+    rows = []
+    for k, f in enumerate(files):
+        a = np.load(f)
+        if a.size and k + 1 < len(files):
+            a = a[a[:, 0] <= starts[k + 1]]       # rows the next segment wrote again (a resumed run)
+        if a.size:
+            rows.append(a)
     return np.vstack(rows) if rows else None
 
 

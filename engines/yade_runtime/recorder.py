@@ -2,12 +2,13 @@
 chunks ``dump/chunk.<first iter>.npz`` (atomic), read by ``engines/yade.py`` ``parse``."""
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
 from yade import O, utils
 
-from .series import chunk_arrays, save_npz_atomic
+from .series import WindowSeries, chunk_arrays, save_npz_atomic, stop_steps  # noqa: F401 (the decks import it from here)
 
 CONTACT_KEYS = ["c_count", "c_i", "c_j", "c_point", "c_normal", "c_fn", "c_ft"]
 
@@ -112,3 +113,30 @@ def save_checkpoint():
     would repeat a step)."""
     O.save("checkpoint.partial.yade.gz")
     os.replace("checkpoint.partial.yade.gz", "checkpoint.yade.gz")
+
+
+#: O.tags key of the wall series' open window (the samples since its last row) at a checkpoint
+WINDOW_TAG = "orch_wall_window"
+
+
+def checkpoint_and_reload(rec, walls) -> None:
+    """A checkpoint of a scene script, taken between ``O.run`` calls (an iteration boundary: positions,
+    O.iter and O.time describe one instant): flush the frames and wall rows, keep the wall series'
+    open window in ``O.tags``, save, and **load the saved file back**. An uninterrupted run thus passes
+    through the very state a resumed run starts from: what ``O.save`` does not keep (the collider's
+    sort arrays, the order interactions are visited and forces summed in, Python objects) is rebuilt
+    at the same step in both (docs/engines.md, Resume). The caller sets its Python side up again."""
+    rec.flush()
+    walls.flush()
+    O.tags[WINDOW_TAG] = json.dumps(walls.acc)
+    save_checkpoint()
+    O.load("checkpoint.yade.gz")
+
+
+def series_after_load(name: str, n_values: int, window: int = 10):
+    """A :class:`WindowSeries` for the run from here on, holding the open window a checkpoint kept
+    (none on a fresh scene): the rows after a resume average the same samples as an uninterrupted
+    run's."""
+    s = WindowSeries(name, n_values, window)
+    s.acc = [list(map(float, a)) for a in json.loads(O.tags[WINDOW_TAG])] if WINDOW_TAG in O.tags.keys() else []
+    return s

@@ -79,3 +79,10 @@ def reopen_series(name: str, it: int):
         fh.writelines(keep)
     os.replace(name + ".partial", name)
     return open(name, "a")
+
+
+def stop_steps(events, restart_every: int) -> list:
+    """The steps a scene script stops at: every event step and every multiple of ``restart_every``
+    before the last event (yade_runtime.recorder.checkpoint_and_reload there)."""
+    last = events[-1]["step"]
+    return sorted({e["step"] for e in events} | set(range(restart_every, last, restart_every)))

@@ -34,10 +34,10 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
-from scipy.integrate import solve_ivp
 
 from ..atomic import write_json
 from ..case import Strict, positive
+from ..contact_law import remembered
 from ..derive import adhesion_force, DerivationError
 from ..numerics import multiple_of
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
@@ -230,6 +230,7 @@ def max_velocity(case) -> float:
     return 2 * max(_v_max(case, g), _omega(case) * g["R_cyl"])
 
 
+@remembered          # an integration (and scipy's import) per call: kept across processes
 def seed000_restitution(E_eff: float, m_eff: float, r_eff: float, v: float) -> float:
     """Restitution [-] that seed 000's damped Hertz law F = 4/3 E* √r ξ^1.5 + γ_n √ξ ξ̇ with
     γ_n = √(4/3 E* m*) delivers at normal impact speed ``v`` [m/s] (force clipped at 0)."""
@@ -251,6 +252,7 @@ def seed000_restitution(E_eff: float, m_eff: float, r_eff: float, v: float) -> f
     stuck.terminal, stuck.direction = True, -1
     xm = (15 * m_eff * v ** 2 / (16 * E_eff * math.sqrt(r_eff))) ** 0.4
     tc = xm / v * 3
+    from scipy.integrate import solve_ivp     # here: scipy.integrate costs ~0.5 s to import (validate, #16)
     sol = solve_ivp(rhs, (0, 50 * tc), [1e-9 * xm, v], events=[out, stuck], rtol=1e-9, atol=1e-12 * xm,
                     max_step=tc / 200)
     return float(max(0.0, -sol.y[1, -1] / v))

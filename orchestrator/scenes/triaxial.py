@@ -52,11 +52,11 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
-from scipy.spatial import ConvexHull, cKDTree
 
 from ..atomic import write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
+from ..contact_law import remembered
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
@@ -64,6 +64,19 @@ from ..psd import lognormal_mu_for_mean, truncated_lognormal
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
+
+
+# scipy.spatial is imported on first use (scipy.optimize: in orchestrator.psd): every case load
+# imports this scene, and they cost ~0.6 s (validate within 2 s, #16)
+def ConvexHull(*args, **kwargs):  # noqa: N802 - scipy's name
+    from scipy.spatial import ConvexHull as f
+    return f(*args, **kwargs)
+
+
+def cKDTree(*args, **kwargs):  # noqa: N802 - scipy's name
+    from scipy.spatial import cKDTree as f
+    return f(*args, **kwargs)
+
 
 #: per-frame controls written to frames.h5 (see module docstring)
 CONTROLS: dict[str, str] = {
@@ -123,7 +136,7 @@ class PSD(Strict):
             u = rng.random(n)
             # uniform in log d inside the bin
             return np.exp(np.log(d[b]) + u * (np.log(d[b + 1]) - np.log(d[b])))
-        mu = lognormal_mu_for_mean(self.mean, self.spread, self.min, self.max)
+        mu = _lognormal_mu(self.min, self.max, self.mean, self.spread)
         return truncated_lognormal(n, mu, self.spread, self.min, self.max, rng)
 
     def mean_diameter(self) -> float:
@@ -133,6 +146,13 @@ class PSD(Strict):
             F = np.array([r[1] for r in self.table])
             return float(np.interp(0.5, F, d))
         return self.mean
+
+
+@remembered          # a root search (and scipy.optimize's import) per call: kept across processes
+def _lognormal_mu(lo, hi, mean, s):
+    """:func:`orchestrator.psd.lognormal_mu_for_mean` under the name the package's table of
+    remembered values (orchestrator/_data/contact_law_memo.json) knows it by."""
+    return lognormal_mu_for_mean(mean, s, lo, hi)
 
 
 class Isotropic(Strict):

@@ -51,6 +51,7 @@ def test_precision_and_recall_on_a_packing_with_known_contacts():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("radius_range, psf, noise, size", [
+    ((4.0, 5.0), 0.5, 0.03, 96),            # 8-10 voxels: needs the scale-aware merge height
     ((5.0, 6.0), 0.8, 0.06, 96),
     ((6.0, 8.0), 1.2, 0.10, 96),
     ((8.0, 10.0), 1.2, 0.10, 96),
