@@ -280,3 +280,24 @@ def test_servo_gain_below_its_stability_limit():
     assert 1.0 < iso["gain_critical"] < 50.0
     with pytest.raises(CaseError, match="scene.isotropic.gain .* stability limit"):
         load_case(SMOKE, overrides={"scene": {"isotropic": {"gain": 1.01 * iso["gain_critical"]}}})
+
+
+def test_drag_ramp_is_the_rearrangement_time_under_the_drag():
+    """The stage-1 drag falls linearly to zero over T = 18 nu/p (t_i^2/tau_d of a d50 grain: the
+    sample's overdamped rearrangement time under the initial drag), rounded up to whole chunks;
+    drag_ramp: 0 switches it off at once."""
+    import math
+    from orchestrator.derive import derive
+    iso = derive(load_case(SMOKE))["scene"]["iso"]
+    dt = derive(load_case(SMOKE))["dt"]
+    T = 18 * iso["drag_viscosity"] / 3e5                      # the smoke case's p = 300 kPa
+    assert iso["drag_ramp_time"] == pytest.approx(T)
+    # the same time from its definition t_i^2 / tau_d with d50's mass and drag coefficient
+    d50, rho, p = 0.551e-3, 2650.0, 3e5
+    t_i = d50 * math.sqrt(rho / p)
+    tau_d = (rho * math.pi * d50 ** 3 / 6) / (6 * math.pi * iso["drag_viscosity"] * d50 / 2)
+    assert iso["drag_ramp_time"] == pytest.approx(t_i ** 2 / tau_d)
+    n = iso["drag_ramp_steps"]
+    assert n % iso["chunk"] == 0 and 0 <= n * dt - T < iso["chunk"] * dt
+    off = derive(load_case(SMOKE, overrides={"scene": {"isotropic": {"drag_ramp": 0}}}))["scene"]["iso"]
+    assert off["drag_ramp_steps"] == 0

@@ -85,6 +85,13 @@ def test_servo_moves_the_platen_down_under_too_little_stress_and_clips():
     assert control.ramp(50, 100) == 0.5 and control.ramp(500, 100) == 1.0 and control.ramp(3, 0) == 1.0
 
 
+def test_drag_ramp_falls_linearly_to_zero():
+    assert control.drag_ramp(1000, 1000, 400) == 1.0
+    assert control.drag_ramp(1100, 1000, 400) == pytest.approx(0.75)
+    assert control.drag_ramp(1400, 1000, 400) == 0.0 and control.drag_ramp(2000, 1000, 400) == 0.0
+    assert control.drag_ramp(1000, 1000, 0) == 0.0
+
+
 def test_servo_pid_settings_reproduce_the_servo_law():
     """YADE's ServoPIDController (v = clip(kP (|F| - target), v_max) along +z) with the derived
     settings is the stage-1 law v = -v_max clip(g (1 - F/(p A)), -1, 1)."""

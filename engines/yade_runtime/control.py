@@ -25,6 +25,13 @@ def ramp(it: int, ramp_steps: int) -> float:
     return min(1.0, it / float(ramp_steps)) if ramp_steps > 0 else 1.0
 
 
+def drag_ramp(it: int, start: int, ramp_steps: int) -> float:
+    """Fraction of the stage-1 drag left at iteration ``it`` of its linear ramp to zero that began at
+    ``start`` and lasts ``ramp_steps`` (derived in the scene: the sample's rearrangement time under the
+    initial drag, 18 nu/p)."""
+    return max(0.0, 1.0 - (it - start) / float(ramp_steps)) if ramp_steps > 0 else 0.0
+
+
 def membrane_correction(corr: float, s3_avg, s3: float, p: float, rows: int, gain: float, limit: float):
     """One update of the membrane correction (the nodal pressure is ``p * corr``): ``s3_avg`` is an
     exponential mean of the lateral stress measured on the grains over ~``rows`` samples; ``corr``

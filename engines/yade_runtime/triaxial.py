@@ -23,13 +23,14 @@ class Controller:
     ``cfg`` keys: pressure [Pa], ramp_steps, chunk, max_chunks, tolerance, v_max [m/s], gain,
     strain_rate [1/s], shear_steps, platen_radius [m] (the platens are fixed spheres of that
     radius), radius0 [m], series_columns, correction_rows, correction_gain, correction_limit,
-    drag_free_end, node_drag, friction, iso_friction, particle_mat (material id).
+    drag_free_end, drag_viscosity [Pa s], drag_ramp_steps (0: the drag goes off at once), node_drag, friction,
+    iso_friction, particle_mat (material id).
     ``bodies``: bot, top (platen ids), ids, pids (grains), clump_ids (or None).
     ``membrane``: a :class:`.membrane.Membrane`; ``rec``: the :class:`.recorder.Recorder`;
     ``drag``: the stage-1 LinearDragEngine; ``state``: a checkpoint's saved state (resume)."""
 
     #: what a checkpoint keeps of a Controller (get_state / the constructor's ``state``)
-    STATE = ("stage", "v", "chunk_rows", "chunks", "shear_end", "area", "corr", "s3_avg")
+    STATE = ("stage", "v", "chunk_rows", "chunks", "shear_end", "area", "corr", "s3_avg", "ramp_start")
 
     def __init__(self, cfg, bodies, membrane, rec, drag, state=None):
         self.cfg, self.membrane, self.rec, self.drag = cfg, membrane, rec, drag
@@ -40,7 +41,7 @@ class Controller:
         self.rows = []
         if state is not None:               # resumed: the state saved with the checkpoint
             for k in self.STATE:
-                setattr(self, k, state[k])
+                setattr(self, k, state.get(k))
             self.chunk_rows = [tuple(r) for r in self.chunk_rows]
             self.out = reopen_series("triax.txt", O.iter)
             return
@@ -57,6 +58,7 @@ class Controller:
         # grain-membrane contacts, averaged over ~correction_rows rows) equals P
         self.corr = 1.0
         self.s3_avg = None
+        self.ramp_start = None               # iteration at which the drag's linear ramp to zero began
 
     # -- the loads ------------------------------------------------------------------------------
     def platens(self):
@@ -69,9 +71,18 @@ class Controller:
         return self.cfg["pressure"] * law.ramp(O.iter, self.cfg["ramp_steps"]) * self.corr
 
     def apply_pressure(self):
-        """The boundary's forces for the next ``update_every`` steps, and the servo's settings."""
+        """The boundary's forces for the next ``update_every`` steps, the servo's settings and the
+        drag coefficient during its ramp."""
         self.membrane.apply_pressure(self.pressure_now(), *self.platens())
         self.update_servo()
+        self.update_drag()
+
+    def update_drag(self):
+        """During the drag's ramp (stage 1 has converged with it): nu = nu0 (1 - (it - start)/ramp_steps),
+        refreshed with the boundary forces; the drag goes off at the chunk test that ends the ramp."""
+        if self.ramp_start is None or not self.grain_drag_on():
+            return
+        self.drag.nu = self.cfg["drag_viscosity"] * law.drag_ramp(O.iter, self.ramp_start, self.cfg["drag_ramp_steps"])
 
     def set_velocity(self, v):
         O.bodies[self.top].state.vel = Vector3(0, 0, v)
@@ -102,6 +113,7 @@ class Controller:
         numerical damping of the sheet's own motion only."""
         if self.cfg["node_drag"]:
             self.drag.ids = list(self.membrane.nodes)
+            self.drag.nu = self.cfg["drag_viscosity"]
             self.drag.dead = False
         else:
             self.drag.dead = True
@@ -161,18 +173,32 @@ class Controller:
     def _end_chunk(self, H):
         c = self.cfg
         P = c["pressure"]
-        self.chunks += 1
         m1 = sum(r[0] for r in self.chunk_rows) / len(self.chunk_rows)
         m3 = sum(r[1] for r in self.chunk_rows) / len(self.chunk_rows)
-        print("ISO chunk %d: sigma1/p = %.4f sigma3/p = %.4f" % (self.chunks, m1 / P, m3 / P), flush=True)
         self.chunk_rows = []
         self.membrane.relax()
+        if self.ramp_start is not None and self.grain_drag_on():
+            # the drag's ramp (as LIGGGHTS' dragramp run: no chunk test, not counted in max_chunks)
+            if O.iter - self.ramp_start >= c["drag_ramp_steps"]:
+                self.drop_grain_drag()
+                print("ISO drag off at step %d, continuing" % O.iter, flush=True)
+            else:
+                print("ISO drag ramp: sigma1/p = %.4f sigma3/p = %.4f nu/nu0 = %.3f" % (
+                    m1 / P, m3 / P, self.drag.nu / c["drag_viscosity"]), flush=True)
+            return
+        self.chunks += 1
+        print("ISO chunk %d: sigma1/p = %.4f sigma3/p = %.4f" % (self.chunks, m1 / P, m3 / P), flush=True)
         conv = law.iso_converged(m1, m3, P, c["tolerance"])
         if c["drag_free_end"] and conv and self.grain_drag_on():
-            # converged with the drag: switch it off and converge again without it
-            self.drop_grain_drag()
+            # converged with the drag: switch it off (or ramp it to zero) and converge again without it
             conv = False
-            print("ISO converged with drag: drag off, continuing", flush=True)
+            if c["drag_ramp_steps"] > 0:
+                self.ramp_start = O.iter
+                print("ISO converged with drag: drag ramped to zero over %d steps from step %d"
+                      % (c["drag_ramp_steps"], O.iter), flush=True)
+            else:
+                self.drop_grain_drag()
+                print("ISO converged with drag: drag off, continuing", flush=True)
         if conv or self.chunks >= c["max_chunks"]:
             if self.chunks >= c["max_chunks"]:
                 print("ISO did not converge within %d chunks" % c["max_chunks"], flush=True)
@@ -190,7 +216,7 @@ class Controller:
         c = self.cfg
         if self.stage == 2:
             return self.shear_end
-        return c["ramp_steps"] + c["chunk"] * (c["max_chunks"] + 1) + c["shear_steps"]
+        return c["ramp_steps"] + c["chunk"] * (c["max_chunks"] + 1) + c["drag_ramp_steps"] + c["shear_steps"]
 
     # -- resume ---------------------------------------------------------------------------------
     def get_state(self):

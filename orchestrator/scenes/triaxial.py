@@ -173,6 +173,11 @@ class Isotropic(Strict):
     drag_free_end: bool = Field(True, description="when stage 1 converges with the drag on, switch the drag off and "
                                                   "continue stage 1 until it converges again without it: the loose "
                                                   "sample's collapse then happens before loading, not at its start")
+    drag_ramp: float = Field(1.0, ge=0, description="the drag is not switched off at once but its coefficient falls "
+                                                    "linearly to zero over this many relaxation times T = 18ν/p "
+                                                    "(derive(): the rearrangement time under the initial drag, "
+                                                    "t_i²/τ_d; ~2 d50 of drift at the terminal speed), rounded up to "
+                                                    "whole chunks; 0: off at once (the sample burst: 6-11 m/s)")
     friction: float | None = Field(None, ge=0, description="grain-grain friction coefficient during stage 1 (sample "
                                                        "preparation; None: contact.friction). A lower value gives a "
                                                        "denser sample, as the seed's vibrated, tapped one (seed 001 "
@@ -519,7 +524,7 @@ class TriaxialParams(ScenePart):
     strain_rate: float        #: loading strain rate [1/s]
     inertial_number: float    #: loading inertial number [-]
     shear_steps: int          #: steps of the loading stage [-]
-    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s]
+    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s], drag_ramp_steps (linear ramp of the drag to zero, whole chunks; 0: off at once), drag_ramp_time [s]
     dump_every: int           #: steps between frames [-]
     series_every: int         #: steps between series rows [-]
     steps: int                #: steps of both stages [-]
@@ -623,6 +628,15 @@ def derive(case, common: Params) -> TriaxialParams:
             raise DerivationError(f"scene.isotropic.drag: the drag time m/b = {tau:.3g} s of the smallest grain is "
                                   f"below dt = {dt:.3g} s (explicit drag unstable); raise "
                                   "scene.isotropic.inertial_number or set drag: false")
+    # drag removal (issue #14: switched off at once, the drag-supported sample burst, 6-8 m/s on 300 grains and
+    # 11 m/s on 2 000 on both engines). Under the drag b = 6 pi nu r a grain of mass m relaxes in tau_d = m/b
+    # (d50: rho d50^2/(18 nu)); a grain pushed by p d50^2 through its neighbours rearranges overdamped in
+    # T = t_i^2/tau_d with t_i = d50 sqrt(rho/p) the inertial time (GDR MiDi 2004): T = 18 nu/p, independent of
+    # d50, the time to drift ~2 d50 at the terminal speed (6 d50/(pi v_t)). Letting b fall at the rate at which
+    # the sample relaxes at the current drag, db/dt = -b/T(b) with T(b) = t_i^2 b/m, gives db/dt = -m/t_i^2:
+    # a LINEAR ramp from b0 to zero lasting T(b0). It ends at a chunk boundary (both decks test chunks).
+    drag_ramp_time = s.isotropic.drag_ramp * 18 * nu / p if nu > 0 else 0.0
+    drag_ramp_steps = int(math.ceil(drag_ramp_time / dt / iso_chunk - 1e-9)) * iso_chunk if drag_ramp_time > 0 else 0
     params = {
         "n": n, "ids": list(range(1, n + 1)), "diameters": d.tolist(),
         # clumps: the member spheres the engines integrate (same shape draw in both engines)
@@ -637,9 +651,11 @@ def derive(case, common: Params) -> TriaxialParams:
                 "drag_free_end": bool(s.isotropic.drag_free_end and nu > 0),
                 # preparation friction (stage 1), restored to contact.friction for loading
                 "friction": (s.isotropic.friction if s.isotropic.friction is not None else case.contact.friction),
-                "drag_coefficient": 6 * math.pi * nu},
+                "drag_coefficient": 6 * math.pi * nu,
+                # linear ramp of the drag coefficient to zero once stage 1 has converged with it (whole chunks)
+                "drag_ramp_steps": drag_ramp_steps, "drag_ramp_time": drag_ramp_time},
         "dump_every": dump_every, "series_every": series_every,
-        "steps": total_iso + shear_steps, "total_steps": total_iso + shear_steps,
+        "steps": total_iso + drag_ramp_steps + shear_steps, "total_steps": total_iso + drag_ramp_steps + shear_steps,
         # resume points every frame interval: YADE checkpoints (O.save) at the start of every
         # dump_every-th iteration; LIGGGHTS restart files every dump_every steps of loading and after
         # every stage-1 chunk test (a chunk is chunk_frames frames). At most one frame interval of

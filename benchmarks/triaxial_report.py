@@ -1,0 +1,134 @@
+"""The issue #14 triaxial figures of one or more run directories (docs/triaxial.md, docs/crossval.md).
+
+    python benchmarks/triaxial_report.py RUN_DIR [RUN_DIR ...]
+
+For each run: the end of stage 1 (scene_summary.json, or the engine log of a run still going), the
+drag removal (ramp start and drag-off step from the engine log), the fastest grain and the number of
+grains above 1 m/s in every frame from the drag-off frame on (frames.h5; for a YADE run still going,
+its dump/chunk.*.npz), and once the run is complete the loading figures: σ3 stray (largest |σ3/p - 1|
+of 10-row means), the largest |ε_v(boundary) - ε_v(hull)|, K'/U (non-affine kinetic over Hertz
+elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3, ε_v at
+ε_a = 1, 2, 5, 10, 15 % (orchestrator.stability.observables, the source of the crossval numbers).
+"""
+from __future__ import annotations
+
+import csv
+import glob
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+FLOOR = 1.0          # m/s, issue #14: no grain above 1 m/s in the frame after the drag goes off
+
+
+def _log_steps(log: str, pattern: str) -> list[int]:
+    return [int(m) for m in re.findall(pattern, log, re.M)]
+
+
+def _frames(run: Path):
+    """(steps, speeds (frames, grains), stage or None) from frames.h5, else from YADE's dump chunks."""
+    if (run / "frames.h5").exists():
+        import h5py
+        with h5py.File(run / "frames.h5") as h:
+            v = h["frames/velocity"][:]
+            st = h["frames/step"][:]
+            stage = h["frames/stage"][:] if "frames/stage" in h["frames"] else None
+        return st, np.linalg.norm(v, axis=2), stage
+    files = sorted(glob.glob(str(run / "dump" / "chunk.*.npz")))
+    if not files:
+        return np.zeros(0), np.zeros((0, 0)), None
+    st, sp = [], []
+    for f in files:
+        z = np.load(f)
+        st.append(z["iter"])
+        sp.append(np.linalg.norm(z["velocity"], axis=2))
+    return np.concatenate(st), np.concatenate(sp), None
+
+
+def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int = 10) -> dict:
+    """σ1/σ3 (10-row running means of σ1 and σ3) and the boundary's ε_v at the strains reached, from
+    ``triax.txt`` alone (a run still going: no frames.h5 yet), with the definitions of
+    ``TriaxialScene.post``: σ1 = F_top/(V/H), σ3 = F_lat/A_lat, ε_a and ε_v from the last stage-1 row."""
+    a = np.loadtxt(run / "triax.txt", comments="#", ndmin=2)
+    stage, zb, zt, ftop, flat, area, vol = a[:, 2], a[:, 3], a[:, 4], a[:, 6], a[:, 7], a[:, 8], a[:, 9]
+    if not (stage >= 2).any():
+        return {}
+    i0 = int(np.flatnonzero(stage >= 2)[0]) - 1
+    H = zt - zb
+    s1, s3 = ftop / (vol / H), flat / area
+    from orchestrator.analysis.triaxial import triaxial_curves
+    sl = slice(i0 + 1, None)
+    ea = (H[i0] - H[sl]) / H[i0]
+    ev = (vol[i0] - vol[sl]) / vol[i0]
+    c = triaxial_curves(ea, s1[sl], s3[sl], ev, smoothing_rows=rows)
+    m1, m3 = c["sigma1_smoothed"].to_numpy(), c["sigma3_smoothed"].to_numpy()
+    out = {"axial_strain_reached": float(ea.max())}
+    for e in strains:
+        if ea.max() >= e * (1 - 1e-3):
+            out[f"stress_ratio@{e:g}"] = float(np.interp(e, ea, m1 / m3))
+            out[f"volumetric_strain@{e:g}"] = float(np.interp(e, ea, ev))
+    return out
+
+
+def report(run: Path) -> dict:
+    run = Path(run)
+    log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
+    out: dict = {"run": str(run)}
+    chunks = re.findall(r"^ISO chunk (\d+): sigma1/p = ([\d.eE+-]+) sigma3/p = ([\d.eE+-]+)", log, re.M)
+    out["iso_chunks"] = [(int(a), round(float(b), 4), round(float(c), 4)) for a, b, c in chunks]
+    out["ramp_start"] = _log_steps(log, r"^ISO converged with drag: drag ramped to zero over \d+ steps from step (\d+)")
+    off = _log_steps(log, r"^ISO drag off at step (\d+)")
+    if not off and re.search(r"^ISO converged with drag: drag off", log, re.M):
+        out["drag_off_note"] = "drag switched off at once (no ramp)"
+    out["drag_off"] = off
+    steps, sp, _ = _frames(run)
+    if off and len(steps):
+        k0 = int(np.searchsorted(steps, off[0] - 1))      # the frame at (or just after) the drag-off step
+        rows = []
+        for k in range(max(0, k0 - 2), min(len(steps), k0 + 8)):
+            rows.append((int(steps[k]), round(float(sp[k].max()), 2), int((sp[k] > FLOOR).sum())))
+        out["fastest_grain_around_drag_off"] = rows           # (step, fastest [m/s], grains above 1 m/s)
+        after = [r for r in rows if r[0] > off[0]]
+        if after:
+            out["frame_after_drag_off"] = after[0]
+    summ = run / "scene_summary.json"
+    if summ.exists():
+        s = json.loads(summ.read_text())
+        out["isotropic_end"] = {k: s["isotropic_end"].get(k) for k in ("converged", "sigma1_error", "sigma3_error",
+                                                                       "steps")}
+        sh = s.get("shear", {})
+        out["sigma3_stray_smoothed"] = sh.get("sigma3_error_max_abs_smoothed")
+        out["peak_stress_ratio"] = sh.get("peak_stress_ratio")
+        out["final_axial_strain"] = sh.get("final_axial_strain")
+        out["dev_volumetric_strain_max"] = s.get("volume_methods", {}).get("volumetric_strain_max_abs_diff")
+    en = run / "analysis" / "energy_summary.csv"
+    if en.exists() and (run / "frames.h5").exists():
+        import h5py
+        with h5py.File(run / "frames.h5") as h:
+            stage = h["frames/stage"][:]
+        with open(en) as f:
+            r = [row for row in csv.DictReader(f)]
+        kn = np.array([float(x["ratio_nonaffine"] or "nan") for x in r])
+        load = (stage[:len(kn)] >= 2) & np.isfinite(kn)
+        if load.any():
+            out["K_nonaffine_over_U_loading_median"] = float(np.median(kn[load]))
+            out["K_nonaffine_over_U_loading_max"] = float(np.max(kn[load]))
+    out["series_figures"] = series_figures(run)
+    if (run / "frames.h5").exists() and (run / "case.yaml").exists():
+        from orchestrator.case import load_case
+        from orchestrator.stability.observables import observables
+        out["observables"] = observables(load_case(run / "case.yaml"), run)
+    return out
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 2:
+        sys.exit("usage: python benchmarks/triaxial_report.py RUN_DIR [RUN_DIR ...]")
+    for d in sys.argv[1:]:
+        r = report(Path(d))
+        for k, v in r.items():
+            print(f"{k}: {json.dumps(v, default=float)}")
+        print()
