@@ -11,21 +11,54 @@ import math
 import numpy as np
 
 
+def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: float, d_max: float,
+                        rng, median: float | None = None) -> np.ndarray:
+    """``n`` diameters [m] with ln d ~ N(``mu_ln``, ``sigma_ln``²) truncated to [``d_min``, ``d_max``]
+    (rejection sampling: the truncated density is the log-normal one renormalised, seed 000 §3.2).
+    The one sampler of the project: :func:`lognormal_diameters` (by median) and the triaxial
+    scene's PSD (by truncated mean, :func:`lognormal_mu_for_mean`) both draw through it. Give
+    ``median`` = exp(mu_ln) [m] instead of ``mu_ln`` (None) to keep a median exact to the last bit."""
+    if not (0 < d_min <= d_max):
+        raise ValueError(f"need 0 < d_min <= d_max, got {d_min}, {d_max}")
+    rng = np.random.default_rng(rng)
+    if sigma_ln == 0:
+        d = math.exp(mu_ln) if median is None else median
+        if not d_min <= d <= d_max:
+            raise ValueError(f"sigma_ln = 0 and the diameter {d} lies outside [{d_min}, {d_max}]")
+        return np.full(n, d)
+    out = np.empty(0)
+    while out.size < n:
+        z = rng.standard_normal(max(2 * (n - out.size), 64))
+        # the same law either way; the two forms differ by an ulp and keep each caller's draws
+        # bit-identical to what it drew before the samplers were folded into one (golden decks)
+        d = np.exp(mu_ln + sigma_ln * z) if median is None else median * np.exp(sigma_ln * z)
+        out = np.concatenate([out, d[(d >= d_min) & (d <= d_max)]])
+    return out[:n]
+
+
 def lognormal_diameters(n: int, median: float, d_min: float, d_max: float, sigma_ln: float,
                         rng) -> np.ndarray:
     """``n`` diameters [m] from a log-normal distribution with median ``median`` [m] and log
-    standard deviation ``sigma_ln`` [-], accepted only within [d_min, d_max] (rejection
-    sampling: the truncated density is the log-normal one renormalised, as in seed 000 §3.2)."""
+    standard deviation ``sigma_ln`` [-], accepted only within [d_min, d_max]
+    (:func:`truncated_lognormal` with mu_ln = ln median)."""
     if not (0 < d_min <= median <= d_max):
         raise ValueError(f"need 0 < d_min <= median <= d_max, got {d_min}, {median}, {d_max}")
-    rng = np.random.default_rng(rng)
-    if sigma_ln == 0:
-        return np.full(n, median)
-    out = np.empty(0)
-    while out.size < n:
-        d = median * np.exp(sigma_ln * rng.standard_normal(max(2 * (n - out.size), 64)))
-        out = np.concatenate([out, d[(d >= d_min) & (d <= d_max)]])
-    return out[:n]
+    return truncated_lognormal(n, None, sigma_ln, d_min, d_max, rng, median=median)
+
+
+def truncated_lognormal_mean(mu_ln: float, sigma_ln: float, d_min: float, d_max: float,
+                             m: int = 4000) -> float:
+    """Number mean [m] of the truncated log-normal (quadrature on m points in ln d)."""
+    x = np.linspace(math.log(d_min), math.log(d_max), m)
+    w = np.exp(-0.5 * ((x - mu_ln) / sigma_ln) ** 2)
+    return float(np.sum(w * np.exp(x)) / np.sum(w))
+
+
+def lognormal_mu_for_mean(mean: float, sigma_ln: float, d_min: float, d_max: float) -> float:
+    """mu_ln such that the log-normal truncated to [d_min, d_max] has number mean ``mean`` [m]."""
+    from scipy.optimize import brentq      # here: scipy.optimize costs ~0.3 s to import (validate, #16)
+    return brentq(lambda mu: truncated_lognormal_mean(mu, sigma_ln, d_min, d_max) - mean,
+                  math.log(d_min) - 5 * sigma_ln, math.log(d_max) + 5 * sigma_ln)
 
 
 def mean_sphere_volume(median: float, d_min: float, d_max: float, sigma_ln: float,
@@ -35,46 +68,74 @@ def mean_sphere_volume(median: float, d_min: float, d_max: float, sigma_ln: floa
     return float(np.mean(np.pi / 6 * d ** 3))
 
 
-def pack_cylinder(radii: np.ndarray, radius: float, z_lo: float, z_hi: float, rng,
-                  wall_clearance: float = 0.0, max_tries: int = 200) -> np.ndarray:
-    """Random loose packing: place spheres of ``radii`` [m] (largest first) at random positions
-    in the cylinder r <= ``radius``, z in [``z_lo``, ``z_hi``] without any overlap with each other
-    or the walls (random sequential addition). Returns (n, 3) positions in the order of
-    ``radii``. Raises ValueError when the volume cannot hold them (RSA jams near φ ≈ 0.38)."""
+class Cylinder:
+    """Container of :func:`rsa_pack`: r <= ``radius`` about the z axis, z in [``z_lo``, ``z_hi``];
+    centres at least ``wall_clearance`` [m] more than a radius from every wall."""
+
+    periodic = False
+
+    def __init__(self, radius: float, z_lo: float, z_hi: float, wall_clearance: float = 0.0):
+        self.radius, self.z_lo, self.z_hi, self.clearance = radius, z_lo, z_hi, wall_clearance
+
+    def draw(self, r: float, rng) -> np.ndarray:
+        R = self.radius - r - self.clearance
+        lo, hi = self.z_lo + r + self.clearance, self.z_hi - r - self.clearance
+        if R <= 0 or hi <= lo:
+            raise ValueError("the packing region is smaller than a particle")
+        rr = R * math.sqrt(rng.random())
+        th = 2 * math.pi * rng.random()
+        return np.array([rr * math.cos(th), rr * math.sin(th), lo + (hi - lo) * rng.random()])
+
+
+class PeriodicBox:
+    """Container of :func:`rsa_pack`: [0, ``L``)² periodic in x and y, z in [``z_lo``, ``z_hi``]
+    (centres at least a radius from both z faces)."""
+
+    periodic = True
+
+    def __init__(self, L: float, z_lo: float, z_hi: float):
+        self.L, self.z_lo, self.z_hi = L, z_lo, z_hi
+
+    def draw(self, r: float, rng) -> np.ndarray:
+        if self.z_hi - r <= self.z_lo + r:
+            raise ValueError("the packing region is smaller than a particle")
+        return np.array([rng.uniform(0, self.L), rng.uniform(0, self.L), rng.uniform(self.z_lo + r, self.z_hi - r)])
+
+
+def rsa_pack(radii: np.ndarray, container, rng, max_tries: int = 200) -> np.ndarray:
+    """Random loose packing by random sequential addition: spheres of ``radii`` [m], largest
+    first, each at the first of up to ``max_tries`` uniform random positions in ``container``
+    (:class:`Cylinder` or :class:`PeriodicBox`) that overlaps no sphere placed before (minimum
+    image across periodic faces). Returns (n, 3) positions in the order of ``radii``. Raises
+    ValueError when a sphere finds no place (RSA jams near φ ≈ 0.38). The one loose packer of
+    the shear-cell and plane-shear scenes."""
     rng = np.random.default_rng(rng)
     radii = np.asarray(radii, dtype=float)
     n = len(radii)
     order = np.argsort(-radii)
     pos = np.full((n, 3), np.nan)
-    r_max = radii.max()
-    cell = 2 * r_max
-    # spatial hash: dict cell -> list of placed indices
+    cell = 2 * radii.max()
+    if container.periodic:
+        nc = max(1, int(container.L // cell))          # cells of L / nc >= 2 r_max, wrapped in x, y
+        cxy, L = container.L / nc, container.L
+    else:
+        nc, cxy = None, cell
     grid: dict[tuple, list] = {}
-    placed_pos = np.empty((n, 3))
-    placed_r = np.empty(n)
-
-    def key(p):
-        return (int(math.floor(p[0] / cell)), int(math.floor(p[1] / cell)), int(math.floor(p[2] / cell)))
-
-    count = 0
-    for idx in order:
+    for count, idx in enumerate(order):
         r = radii[idx]
-        R = radius - r - wall_clearance
-        lo, hi = z_lo + r + wall_clearance, z_hi - r - wall_clearance
-        if R <= 0 or hi <= lo:
-            raise ValueError("the packing region is smaller than a particle")
-        ok = False
         for _ in range(max_tries):
-            rr = R * math.sqrt(rng.random())
-            th = 2 * math.pi * rng.random()
-            p = np.array([rr * math.cos(th), rr * math.sin(th), lo + (hi - lo) * rng.random()])
-            kx, ky, kz = key(p)
+            p = container.draw(r, rng)
+            ix, iy, iz = int(math.floor(p[0] / cxy)), int(math.floor(p[1] / cxy)), int(math.floor(p[2] / cell))
             clash = False
             for dx in (-1, 0, 1):
                 for dy in (-1, 0, 1):
                     for dz in (-1, 0, 1):
-                        for j in grid.get((kx + dx, ky + dy, kz + dz), ()):
-                            if np.sum((placed_pos[j] - p) ** 2) < (placed_r[j] + r) ** 2:
+                        key = ((ix + dx) % nc, (iy + dy) % nc, iz + dz) if nc else (ix + dx, iy + dy, iz + dz)
+                        for j in grid.get(key, ()):
+                            d = p - pos[j]
+                            if nc:
+                                d[:2] -= L * np.round(d[:2] / L)
+                            if d @ d < (r + radii[j]) ** 2:
                                 clash = True
                                 break
                         if clash:
@@ -84,17 +145,25 @@ def pack_cylinder(radii: np.ndarray, radius: float, z_lo: float, z_hi: float, rn
                 if clash:
                     break
             if not clash:
-                ok = True
                 break
-        if not ok:
+        else:
             raise ValueError(f"could not place particle {count + 1} of {n} without overlap after {max_tries} tries: "
                              "the packing volume is too small for this volume fraction")
-        placed_pos[count] = p
-        placed_r[count] = r
-        grid.setdefault((kx, ky, kz), []).append(count)
         pos[idx] = p
-        count += 1
+        key = (ix % nc, iy % nc, iz) if nc else (ix, iy, iz)
+        grid.setdefault(key, []).append(idx)
     return pos
+
+
+def pack_cylinder(radii: np.ndarray, radius: float, z_lo: float, z_hi: float, rng,
+                  wall_clearance: float = 0.0, max_tries: int = 200) -> np.ndarray:
+    """:func:`rsa_pack` in a :class:`Cylinder` (shear cell)."""
+    return rsa_pack(radii, Cylinder(radius, z_lo, z_hi, wall_clearance), rng, max_tries)
+
+
+def pack_box(radii: np.ndarray, L: float, z_lo: float, z_hi: float, rng, max_tries: int = 2000) -> np.ndarray:
+    """:func:`rsa_pack` in a :class:`PeriodicBox` (plane shear)."""
+    return rsa_pack(radii, PeriodicBox(L, z_lo, z_hi), rng, max_tries)
 
 
 def max_overlap(position: np.ndarray, radii: np.ndarray) -> float:

@@ -189,7 +189,9 @@ def test_smoke_killed_run_resumes_from_its_restart_file(smoke, tmp_path):
     r_min = float(ref.radius.min())
     dev = float(np.abs(got.position[after] - ref.position[after]).max()) / r_min if after.any() else 0.0
     print(f"resumed from step {s_resume}: largest position difference after it {dev:.3g} r_min")
-    # not bit-exact after the restart (cause not isolated; the packing is chaotic, so any rounding
-    # difference grows): measured 5.21 r_min by the end from step 11 560; LIGGGHTS' figure is 6
-    # (tests/test_resume_scenes.py); this bound is that measured figure, not a physical tolerance
-    assert dev < 6.0, dev
+    # the floor (issue #16): equal to the uninterrupted run to 1e-9 r_min. Not met on LAMMPS yet
+    # (measured 5.21 r_min by the end from step 11 560; cause not isolated, a candidate is the
+    # wall velocity the region fix derives from its previous position after a restart): reported
+    # as an expected failure with the figure, after the structural checks above have passed
+    if dev > 1e-9:
+        pytest.xfail(f"LAMMPS shear-cell resume not exact: {dev:.3g} r_min after step {s_resume}")

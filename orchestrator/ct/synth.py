@@ -341,7 +341,7 @@ def acquire(phase, psf_sigma=0.8, noise=0.05, drift=0.0, pore=0.2, solid=0.8, se
 
 
 def render_scan(shape, voxel_size, centres, radii=None, grains=None, origin=(0, 0, 0), hollow=None,
-                supersample=5, time=float("nan"), controls=None, **acquire_kw) -> Scan:
+                supersample=5, time=float("nan"), controls=None, _phase=None, _keep=None, **acquire_kw) -> Scan:
     """Render spheres (``centres`` (N,3) [m], ``radii`` (N,) [m]) or a list of :class:`Grain` into a
     :class:`Scan`. ``hollow`` (N,) gives the void/grain radius ratio per sphere (0 = solid)."""
     if grains is None:
@@ -350,7 +350,9 @@ def render_scan(shape, voxel_size, centres, radii=None, grains=None, origin=(0, 
         hol = np.zeros(len(centres)) if hollow is None else np.broadcast_to(hollow, (len(centres),))
         ok = np.all(np.isfinite(centres), axis=1)
         grains = [Grain(c, r, hollow=float(h)) for c, r, h, k in zip(centres, radii, hol, ok) if k]
-    phase = render_phase(shape, voxel_size, grains, origin, supersample)
+    phase = render_phase(shape, voxel_size, grains, origin, supersample) if _phase is None else _phase
+    if _keep is not None:
+        _keep.append(phase)
     return Scan(acquire(phase, **acquire_kw), voxel_size, origin, time, dict(controls or {}), "<synthetic>")
 
 
@@ -366,11 +368,15 @@ def render_sequence(shape, voxel_size, positions, radii=None, grain_shapes=None,
     if grain_shapes is not None:
         radials = [_GridRadial(c, c.shape[0] - 1) for c in grain_shapes]
     scans = []
+    phases = {}                # a frame that repeats an earlier one's grains reuses its solid fraction
     it = range(T)
     if progress:
         from rich.progress import track
         it = track(it, description="rendering scans")
     for t in it:
+        key = positions[t].tobytes() + (b"" if rotations is None else np.asarray(rotations[t], float).tobytes())
+        keep = [] if key not in phases else None
+        kw["_phase"], kw["_keep"] = phases.get(key), keep
         if radials is None:
             sc = render_scan(shape, voxel_size, positions[t], radii, origin=origin, seed=seed + t,
                              time=float(times[t]) if times is not None else float(t),
@@ -381,6 +387,8 @@ def render_sequence(shape, voxel_size, positions, radii=None, grain_shapes=None,
             sc = render_scan(shape, voxel_size, None, grains=grains, origin=origin, seed=seed + t,
                              time=float(times[t]) if times is not None else float(t),
                              controls={k: float(v[t]) for k, v in (controls or {}).items()}, **kw)
+        if keep:
+            phases[key] = keep[0]
         sc.source = f"<synthetic frame {t}>"
         scans.append(sc)
     return scans

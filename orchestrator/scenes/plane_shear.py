@@ -37,7 +37,7 @@ from ..numerics import multiple_of
 from ..derive import adhesion_force, DerivationError
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
 from ..particles_io import ensure_particle_table
-from ..psd import lognormal_diameters, mean_sphere_volume
+from ..psd import lognormal_diameters, mean_sphere_volume, pack_box
 from ..units import Pressure
 from . import base
 from .shear_cell import PSD
@@ -252,55 +252,17 @@ def derive(case, common: Params) -> PlaneShearParams:
 
 
 # ------------------------------------------------------------------------------------------------
-def pack_box(radii, L: float, z_lo: float, z_hi: float, rng, max_tries: int = 2000) -> np.ndarray:
-    """Random sequential addition of spheres (largest first) in [0, L)² (periodic) × [z_lo, z_hi]
-    (centres at least a radius from both z faces), no overlaps. Returns positions in input order."""
-    radii = np.asarray(radii, float)
-    n = len(radii)
-    order = np.argsort(-radii)
-    cell = 2 * radii.max()
-    nc = max(1, int(L // cell))
-    cxy = L / nc
-    grid: dict = {}
-    pos = np.full((n, 3), np.nan)
-    for k in order:
-        r = radii[k]
-        for _ in range(max_tries):
-            p = np.array([rng.uniform(0, L), rng.uniform(0, L), rng.uniform(z_lo + r, z_hi - r)])
-            ix, iy, iz = int(p[0] // cxy) % nc, int(p[1] // cxy) % nc, int(math.floor(p[2] / cell))
-            ok = True
-            for dx in (-1, 0, 1):
-                for dy in (-1, 0, 1):
-                    for dz in (-1, 0, 1):
-                        for j in grid.get(((ix + dx) % nc, (iy + dy) % nc, iz + dz), ()):
-                            d = p - pos[j]
-                            d[:2] -= L * np.round(d[:2] / L)
-                            if d @ d < (r + radii[j]) ** 2:
-                                ok = False
-                                break
-                        if not ok:
-                            break
-                    if not ok:
-                        break
-                if not ok:
-                    break
-            if ok:
-                pos[k] = p
-                grid.setdefault((ix, iy, iz), []).append(k)
-                break
-        else:
-            raise DerivationError(f"plane_shear: cannot place {n} grains at the loose fraction (RSA jammed); "
-                                  "lower scene.loose_fraction")
-    return pos
-
-
 def sample_particles(case, params) -> dict:
     s = case.scene
     sc = params["scene"]
     g = sc["geometry"]
     rng = np.random.default_rng(case.seed)
     d = lognormal_diameters(s.n_particles, s.psd.median, s.psd.d_min, s.psd.d_max, s.psd.sigma_ln, rng)
-    pos = pack_box(d / 2, g["L"], g["z_pack"][0], g["z_pack"][1], rng)
+    try:
+        pos = pack_box(d / 2, g["L"], g["z_pack"][0], g["z_pack"][1], rng)
+    except ValueError as exc:
+        raise DerivationError(f"plane_shear: cannot place {len(d)} grains at the loose fraction (RSA jammed: {exc}); "
+                              "lower scene.loose_fraction") from None
     nw1 = g["n_wall_side"]
     a = g["L"] / nw1
     xy = (np.stack(np.meshgrid(np.arange(nw1), np.arange(nw1), indexing="ij"), -1).reshape(-1, 2) + 0.5) * a

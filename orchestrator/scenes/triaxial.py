@@ -60,18 +60,14 @@ from ..contact_law import remembered
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
+from ..psd import lognormal_mu_for_mean, truncated_lognormal
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
 
 
-# scipy.optimize and scipy.spatial are imported on first use: every case load imports this scene,
-# and they cost ~0.6 s (validate within 2 s, #16)
-def brentq(*args, **kwargs):
-    from scipy.optimize import brentq as f
-    return f(*args, **kwargs)
-
-
+# scipy.spatial is imported on first use (scipy.optimize: in orchestrator.psd): every case load
+# imports this scene, and they cost ~0.6 s (validate within 2 s, #16)
 def ConvexHull(*args, **kwargs):  # noqa: N802 - scipy's name
     from scipy.spatial import ConvexHull as f
     return f(*args, **kwargs)
@@ -141,11 +137,7 @@ class PSD(Strict):
             # uniform in log d inside the bin
             return np.exp(np.log(d[b]) + u * (np.log(d[b + 1]) - np.log(d[b])))
         mu = _lognormal_mu(self.min, self.max, self.mean, self.spread)
-        out = np.empty(0)
-        while len(out) < n:
-            x = np.exp(rng.normal(mu, self.spread, size=2 * n))
-            out = np.concatenate([out, x[(x >= self.min) & (x <= self.max)]])
-        return out[:n]
+        return truncated_lognormal(n, mu, self.spread, self.min, self.max, rng)
 
     def mean_diameter(self) -> float:
         """d50 by number (table: by mass) [m], the grain size in the inertial number."""
@@ -156,15 +148,11 @@ class PSD(Strict):
         return self.mean
 
 
-def _truncated_mean(mu, s, lo, hi, m=4000):
-    x = np.linspace(math.log(lo), math.log(hi), m)
-    w = np.exp(-0.5 * ((x - mu) / s) ** 2)
-    return float(np.sum(w * np.exp(x)) / np.sum(w))
-
-
 @remembered          # a root search (and scipy.optimize's import) per call: kept across processes
 def _lognormal_mu(lo, hi, mean, s):
-    return brentq(lambda mu: _truncated_mean(mu, s, lo, hi) - mean, math.log(lo) - 5 * s, math.log(hi) + 5 * s)
+    """:func:`orchestrator.psd.lognormal_mu_for_mean` under the name the package's table of
+    remembered values (orchestrator/_data/contact_law_memo.json) knows it by."""
+    return lognormal_mu_for_mean(mean, s, lo, hi)
 
 
 class Isotropic(Strict):

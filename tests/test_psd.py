@@ -1,0 +1,97 @@
+"""The one truncated-log-normal sampler (orchestrator.psd.truncated_lognormal), used by the
+plane-shear and shear-cell scenes (by median) and the triaxial scene (by truncated mean)."""
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from orchestrator import psd
+from orchestrator.scenes.triaxial import PSD
+
+
+def test_untruncated_median_and_sigma_recovered():
+    # bounds 6 sigma out: the truncation removes ~2e-9 of the mass
+    d = psd.truncated_lognormal(200_000, math.log(1e-3), 0.25, 1e-3 * math.exp(-1.5), 1e-3 * math.exp(1.5), 1)
+    x = np.log(d)
+    # standard errors: median ~1.25 sigma/sqrt(n) = 7e-4, sigma sigma/sqrt(2n) = 4e-4
+    assert np.median(x) == pytest.approx(math.log(1e-3), abs=4e-3)
+    assert np.std(x) == pytest.approx(0.25, rel=0.01)
+
+
+def test_truncation_respected_and_moments_of_the_truncated_law():
+    mu, s, lo, hi = math.log(30e-6), 0.3, 25e-6, 50e-6
+    d = psd.truncated_lognormal(100_000, mu, s, lo, hi, np.random.default_rng(2))
+    assert d.min() >= lo and d.max() <= hi and len(d) == 100_000
+    # truncated normal in ln d: median at Phi^-1 of the middle of [Phi(a), Phi(b)]
+    a, b = (math.log(lo) - mu) / s, (math.log(hi) - mu) / s
+    med = mu + s * norm.ppf(0.5 * (norm.cdf(a) + norm.cdf(b)))
+    assert np.median(np.log(d)) == pytest.approx(med, abs=3e-3)
+    assert np.mean(d) == pytest.approx(psd.truncated_lognormal_mean(mu, s, lo, hi), rel=2e-3)
+    # the lower cut removes ~27 % of the untruncated law: the sample median is not exp(mu)
+    assert abs(np.median(d) / 30e-6 - 1) > 0.05
+
+
+def test_seeded_and_degenerate():
+    d = psd.lognormal_diameters(5000, 30e-6, 25e-6, 50e-6, 0.12, 7)
+    assert np.array_equal(d, psd.lognormal_diameters(5000, 30e-6, 25e-6, 50e-6, 0.12, 7))
+    assert np.all(psd.lognormal_diameters(10, 30e-6, 25e-6, 50e-6, 0.0, 7) == 30e-6)
+    with pytest.raises(ValueError, match="d_min <= median <= d_max"):
+        psd.lognormal_diameters(10, 60e-6, 25e-6, 50e-6, 0.12, 7)
+    with pytest.raises(ValueError, match="outside"):
+        psd.truncated_lognormal(10, math.log(60e-6), 0.0, 25e-6, 50e-6, 7)
+
+
+def test_triaxial_psd_draws_through_the_same_sampler_and_hits_its_mean():
+    p = PSD(min="0.8 mm", max="1.6 mm", mean="1.1 mm", spread=0.25)
+    d = p.sample(50_000, np.random.default_rng(3))
+    mu = psd.lognormal_mu_for_mean(1.1e-3, 0.25, 0.8e-3, 1.6e-3)
+    assert np.array_equal(d, psd.truncated_lognormal(50_000, mu, 0.25, 0.8e-3, 1.6e-3, np.random.default_rng(3)))
+    assert d.min() >= 0.8e-3 and d.max() <= 1.6e-3
+    assert np.mean(d) == pytest.approx(1.1e-3, rel=3e-3)
+
+
+# ------------------------------------------------------------------------------------------------
+# the loose packer (random sequential addition) in its two containers
+# ------------------------------------------------------------------------------------------------
+def _min_gap(pos, r, L=None):
+    """Smallest |x_i - x_j| - r_i - r_j over all pairs (minimum image in x, y when L is given)."""
+    d = pos[:, None, :] - pos[None, :, :]
+    if L is not None:
+        d[..., :2] -= L * np.round(d[..., :2] / L)
+    gap = np.linalg.norm(d, axis=-1) - r[:, None] - r[None, :]
+    return gap[np.triu_indices(len(r), 1)].min()
+
+
+def test_rsa_cylinder_inside_no_overlap_target_fraction():
+    rng = np.random.default_rng(1)
+    R, H, clear, phi = 6.0, 12.0, 0.05, 0.25
+    r = rng.uniform(0.4, 0.6, int(phi * np.pi * R ** 2 * H / (4 / 3 * np.pi * 0.5 ** 3 * 1.0)))
+    pos = psd.pack_cylinder(r, R, 0.0, H, 2, wall_clearance=clear)
+    assert np.isfinite(pos).all()                                   # every grain placed
+    assert np.sum(4 / 3 * np.pi * r ** 3) / (np.pi * R ** 2 * H) >= 0.24   # the target fraction, all placed
+    assert np.all(np.hypot(pos[:, 0], pos[:, 1]) + r <= R - clear + 1e-12)
+    assert np.all(pos[:, 2] - r >= clear - 1e-12) and np.all(pos[:, 2] + r <= H - clear + 1e-12)
+    assert _min_gap(pos, r) >= 0.0 and psd.max_overlap(pos, r) == 0.0
+    assert np.array_equal(pos, psd.pack_cylinder(r, R, 0.0, H, 2, wall_clearance=clear))
+
+
+def test_rsa_periodic_box_minimum_image_and_target_fraction():
+    rng = np.random.default_rng(3)
+    L, H, phi = 5.0, 10.0, 0.30                 # 2-5 cells a side: the wrapped neighbour search matters
+    r = rng.uniform(0.4, 0.6, int(phi * L * L * H / (4 / 3 * np.pi * 0.5 ** 3)))
+    pos = psd.pack_box(r, L, 0.0, H, np.random.default_rng(4))
+    assert np.isfinite(pos).all()
+    assert np.sum(4 / 3 * np.pi * r ** 3) / (L * L * H) >= 0.29
+    assert np.all((pos[:, :2] >= 0) & (pos[:, :2] < L))
+    assert np.all(pos[:, 2] - r >= 0) and np.all(pos[:, 2] + r <= H)
+    assert _min_gap(pos, r, L) >= 0.0                               # across the periodic faces too
+
+
+def test_rsa_jams_with_a_clear_error():
+    with pytest.raises(ValueError, match="could not place particle"):
+        psd.pack_cylinder(np.full(500, 1.0), 5.0, 0.0, 5.0, 1)
+    with pytest.raises(ValueError, match="could not place particle"):
+        psd.pack_box(np.full(500, 1.0), 5.0, 0.0, 5.0, 1, max_tries=50)
+    with pytest.raises(ValueError, match="smaller than a particle"):
+        psd.pack_box(np.full(3, 1.0), 5.0, 0.0, 1.5, 1)
