@@ -144,6 +144,7 @@ def test_smoke_upper_piston_turned_by_the_commanded_angle(smoke):
 
 
 @pytest.mark.engine
+@pytest.mark.slow   # a second LAMMPS smoke run, killed and resumed (~2 min): out of the 15-minute default suite
 def test_smoke_killed_run_resumes_from_its_restart_file(smoke, tmp_path):
     """A run killed (SIGKILL of the orchestrator and LAMMPS) after its second restart file resumes
     from it: the servo's state is the marker atom's z in the restart file. Every frame once at

@@ -47,7 +47,9 @@ def test_run_report_opens_offline(chromium, liggghts_run, tmp_path):
     import re
     cells = re.findall(r"<td[^>]*>(.*?)</td>", html)
     assert not [c for c in cells if c.lstrip().startswith("{")], "a table cell prints a raw mapping"
-    assert "μ_macro" in html and "band width" in html           # the shear cell's key figures
+    # the shear cell's key figures: mu_macro, and the band's width or the statement that none was
+    # fitted (the smoke case is too small for a band every time)
+    assert "μ_macro" in html and ("band width" in html or "no steady band fitted" in html)
     assert "seed000_damping" in html
     r = check_page(out, tmp_path / "run.png")
     assert r.ok, r.problems()
