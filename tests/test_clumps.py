@@ -177,7 +177,7 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
     assert out.status == "complete", out.status
     assert any(s["mechanism"] == "inserted_clumps" for s in out.summary["substitutions"])
     rd = out.run_dir
-    C = json.loads((rd / "params.json").read_text())["scene"]["clumps"]["liggghts"]
+    C = json.loads((rd / "params.json").read_text())["scene"]["clumps"]["inserted"]   # the inserted-clumps table (engine-neutral name)
     rho = case.material.density
     owner = np.loadtxt(rd / "clumps.txt", ndmin=2).astype(int)
     with h5py.File(rd / "frames.h5") as f:
