@@ -126,24 +126,9 @@ def rsa_pack(radii: np.ndarray, container, rng, max_tries: int = 200) -> np.ndar
         for _ in range(max_tries):
             p = container.draw(r, rng)
             ix, iy, iz = int(math.floor(p[0] / cxy)), int(math.floor(p[1] / cxy)), int(math.floor(p[2] / cell))
-            clash = False
-            for dx in (-1, 0, 1):
-                for dy in (-1, 0, 1):
-                    for dz in (-1, 0, 1):
-                        key = ((ix + dx) % nc, (iy + dy) % nc, iz + dz) if nc else (ix + dx, iy + dy, iz + dz)
-                        for j in grid.get(key, ()):
-                            d = p - pos[j]
-                            if nc:
-                                d[:2] -= L * np.round(d[:2] / L)
-                            if d @ d < (r + radii[j]) ** 2:
-                                clash = True
-                                break
-                        if clash:
-                            break
-                    if clash:
-                        break
-                if clash:
-                    break
+            keys = {((ix + dx) % nc, (iy + dy) % nc, iz + dz) if nc else (ix + dx, iy + dy, iz + dz)
+                    for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)}    # a set: nc < 3 wraps
+            clash = any(_overlaps(p, pos[j], r + radii[j], L if nc else None) for k in keys for j in grid.get(k, ()))
             if not clash:
                 break
         else:
@@ -153,6 +138,14 @@ def rsa_pack(radii: np.ndarray, container, rng, max_tries: int = 200) -> np.ndar
         key = (ix % nc, iy % nc, iz) if nc else (ix, iy, iz)
         grid.setdefault(key, []).append(idx)
     return pos
+
+
+def _overlaps(p: np.ndarray, q: np.ndarray, contact: float, L: float | None) -> bool:
+    """Spheres at ``p`` and ``q`` closer than ``contact`` [m] (minimum image in x, y over period ``L``)."""
+    d = p - q
+    if L is not None:
+        d[:2] -= L * np.round(d[:2] / L)
+    return d @ d < contact ** 2
 
 
 def pack_cylinder(radii: np.ndarray, radius: float, z_lo: float, z_hi: float, rng,

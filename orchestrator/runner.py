@@ -25,7 +25,7 @@ from engines.render import templates_hash
 from .atomic import write_json, write_text
 from .case import Case
 from .derive import derive
-from .sizing import estimate_wall_time  # noqa: F401  (re-exported)
+from .sizing import estimate_wall_time
 from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
 from .params import Params, thaw

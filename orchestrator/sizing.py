@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 
+from .clock import estimate_engine_time
 from .registry import get_engine
 
 #: the orchestrator's packing and particle table [bytes per particle]
@@ -123,8 +124,6 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
     model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps (a + b n)
     / S(workers) per engine and scene); an engine or scene never measured falls back to the adapter's
     bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck runs."""
-    from .clock import estimate_engine_time
-    from .registry import get_engine
     eng = get_engine(engine_name)
     sc = params["scene"]
     n = sc.get("n", len(sc.get("ids", [])))

@@ -22,7 +22,8 @@ if "NUMBA_CACHE_DIR" not in os.environ and not os.access(os.path.dirname(os.path
 
 import numba  # noqa: E402  (after NUMBA_CACHE_DIR: numba reads it at import)
 
-__all__ = ["edt", "grow_kernel", "region_sums", "label_stats", "run_ends"]
+__all__ = ["edt", "grow_kernel", "region_sums", "label_stats", "extreme_candidates", "basin_saddles",
+           "label_sizes", "table_mask"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -34,22 +35,14 @@ def _envelope(f, n, out, v, zb):
         fq = f[q]
         if fq == inf:
             continue
-        if k < 0:
-            k = 0
-            v[0] = q
-            zb[0] = -inf
-            zb[1] = inf
-            continue
-        while True:
+        s = 0.0
+        while k >= 0:                            # pop the parabolas the new one hides
             p = v[k]
             s = ((fq + q * q) - (f[p] + p * p)) / (2.0 * (q - p))
-            if s <= zb[k]:
-                k -= 1
-                if k < 0:
-                    break
-            else:
+            if s > zb[k]:
                 break
-        if k < 0:
+            k -= 1
+        if k < 0:                                # the first source, or it hides every earlier one
             k = 0
             v[0] = q
             zb[0] = -inf
@@ -227,28 +220,6 @@ def label_stats(labels, dist, n):
             for a in range(3, 6):
                 box[k, a] += 1
     return cnt, box, peak
-
-
-@numba.njit(cache=True, nogil=True)
-def run_ends(labels):
-    """Labelled voxels that end a run of their label along z, y and x (a neighbour on either side,
-    or the volume border, differs along every axis): the only possible convex-hull vertices."""
-    nz, ny, nx = labels.shape
-    out = np.zeros(labels.shape, np.bool_)
-    for z in range(nz):
-        for y in range(ny):
-            for x in range(nx):
-                lab = labels[z, y, x]
-                if lab == 0:
-                    continue
-                if not (z == 0 or z == nz - 1 or labels[z - 1, y, x] != lab or labels[z + 1, y, x] != lab):
-                    continue
-                if not (y == 0 or y == ny - 1 or labels[z, y - 1, x] != lab or labels[z, y + 1, x] != lab):
-                    continue
-                if not (x == 0 or x == nx - 1 or labels[z, y, x - 1] != lab or labels[z, y, x + 1] != lab):
-                    continue
-                out[z, y, x] = True
-    return out
 
 
 @numba.njit(cache=True, nogil=True)
