@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from .contact_law import remembered
+
 
 def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: float, d_max: float,
                         rng, median: float | None = None) -> np.ndarray:
@@ -54,6 +56,7 @@ def truncated_lognormal_mean(mu_ln: float, sigma_ln: float, d_min: float, d_max:
     return float(np.sum(w * np.exp(x)) / np.sum(w))
 
 
+@remembered          # a root search (and scipy.optimize's import) per call: kept across processes
 def lognormal_mu_for_mean(mean: float, sigma_ln: float, d_min: float, d_max: float) -> float:
     """mu_ln such that the log-normal truncated to [d_min, d_max] has number mean ``mean`` [m]."""
     from scipy.optimize import brentq      # here: scipy.optimize costs ~0.3 s to import (validate, #16)

@@ -56,7 +56,6 @@ from pydantic import Field, field_validator, model_validator
 from ..atomic import write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
-from ..contact_law import remembered
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
@@ -136,7 +135,7 @@ class PSD(Strict):
             u = rng.random(n)
             # uniform in log d inside the bin
             return np.exp(np.log(d[b]) + u * (np.log(d[b + 1]) - np.log(d[b])))
-        mu = _lognormal_mu(self.min, self.max, self.mean, self.spread)
+        mu = lognormal_mu_for_mean(self.mean, self.spread, self.min, self.max)
         return truncated_lognormal(n, mu, self.spread, self.min, self.max, rng)
 
     def mean_diameter(self) -> float:
@@ -146,13 +145,6 @@ class PSD(Strict):
             F = np.array([r[1] for r in self.table])
             return float(np.interp(0.5, F, d))
         return self.mean
-
-
-@remembered          # a root search (and scipy.optimize's import) per call: kept across processes
-def _lognormal_mu(lo, hi, mean, s):
-    """:func:`orchestrator.psd.lognormal_mu_for_mean` under the name the package's table of
-    remembered values (orchestrator/_data/contact_law_memo.json) knows it by."""
-    return lognormal_mu_for_mean(mean, s, lo, hi)
 
 
 class Isotropic(Strict):
