@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from ._fits import erf_profile, fractal_dimension
 
 __all__ = ["plot_d2min", "plot_rdf", "plot_coordination", "plot_clusters", "plot_profiles", "plot_shearband",
@@ -116,8 +117,13 @@ def plot_profiles(res, **kw):
     """Axial and radial number density and volume fraction (seed 000, Fig. 1)."""
     ax_t, rad = res.tables["axial"], res.tables["radial"]
     fig, (a1, a2) = _fig(2)
+    control = res.scalars.get("control", "")
     for k, g in ax_t.groupby("frame"):
-        a1.plot(g["n"] * 1e-9, g["z"] * MM, label=f"frame {k} ({g['control'].iloc[0]:.4g})")
+        c = g["control"].iloc[0]
+        # an angle control is stored in rad (frames.h5 is SI), shown in degrees
+        lab = f"{np.degrees(c):.1f}°" if control == "angle" else f"{control} {c:.4g}".strip()
+        a1.plot(g["n"] * 1e-9, g["z"] * MM, label=f"frame {k} ({lab})")
+    a1.xaxis.set_major_locator(MaxNLocator(4))        # densities of 1e4-1e5 /mm³: few, readable ticks
     for k, g in rad.groupby("frame"):
         a2.plot(g["r"] * MM, g["n"] * 1e-9, label=f"frame {k}")
     a1.set_xlabel(r"n [1/mm$^3$]"); a1.set_ylabel("z [mm]"); a1.legend(fontsize=7)

@@ -125,7 +125,7 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
                                 "n": m["n"].ravel(), "phi": m["phi"].ravel()}))
     return Result("profiles", tables={"axial": pd.concat(ax, ignore_index=True), "radial": pd.concat(rad, ignore_index=True),
                                       "map": pd.concat(mp, ignore_index=True)},
-                  scalars={"center_x": center[0], "center_y": center[1], "z_ref": z_ref, "r_max": r_max},
+                  scalars={"center_x": center[0], "center_y": center[1], "z_ref": z_ref, "r_max": r_max, "control": cname},
                   options={"center": center, "z_ref": z_ref, "r_max": r_max, "z_range": list(z_range),
                            "radial_z_range": list(radial_z_range), "bins_r": bins_r, "bins_z": bins_z},
                   plotter=plot_profiles)
