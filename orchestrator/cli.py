@@ -189,6 +189,11 @@ def cmd_analyze(args) -> int:
         print(f"error: {run_dir}: no such run directory or frames.h5; give a run directory "
               "(runs/<case>/<engine>-<hash>), a frames.h5 or a CT frame set", file=sys.stderr)
         return 2
+    inside = sorted(p.parent for p in run_dir.glob("*/frames.h5")) if run_dir.is_dir() else []
+    if inside and not (run_dir / "frames.h5").exists():
+        print(f"error: {run_dir}: not a run directory (no frames.h5); it holds the runs "
+              f"{', '.join(str(p) for p in inside)}: give one of them", file=sys.stderr)
+        return 2
     specs = args.analysis
     if not specs:
         case_file = run_dir / "case.yaml"

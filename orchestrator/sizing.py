@@ -57,12 +57,13 @@ def estimate(case, params: dict, engine: str) -> dict:
     cols = 1 + 3 * (1 + o.velocity + o.angular_velocity + o.force + o.torque) + (7 if o.stress else 0)
     frames_bytes = frames * n * cols * 8
     eng = get_engine(engine)
+    t_engine, basis = engine_time_estimate(case, params, engine)
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "frames": frames,
             "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
             "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),
-            "disk_bytes": int(frames_bytes), "engine_time_s": float(estimate_wall_time(case, params, engine))}
+            "disk_bytes": int(frames_bytes), "engine_time_s": float(t_engine), "engine_time_basis": basis}
 
 
 def fmt_bytes(b: float) -> str:
@@ -88,7 +89,12 @@ def fmt_s(seconds: float) -> str:
 def describe(size: dict) -> str:
     return (f"{size['particles']:,} particles, {size['steps']:,} steps, {size['frames']} frames; memory "
             f"~{fmt_bytes(size['memory_bytes'])}, frames.h5 ~{fmt_bytes(size['disk_bytes'])}, engine time "
-            f"~{fmt_s(size['engine_time_s'])}")
+            f"~{fmt_s(size['engine_time_s'])}" + _basis_note(size.get("engine_time_basis", "")))
+
+
+def _basis_note(basis: str) -> str:
+    """The estimate's basis after the figure, unless it is the engine's and scene's own runs."""
+    return "" if not basis or basis.startswith("measured") else f" ({basis})"
 
 
 def problems(case, size: dict) -> list[str]:
@@ -120,15 +126,25 @@ def check_fits(case, size: dict, force: bool = False) -> list[str]:
 
 
 def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
-    """Engine wall time [s] estimated from the derived step count and particle count with the cost
-    model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps (a + b n)
-    / S(workers) per engine and scene); an engine or scene never measured falls back to the adapter's
-    bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck runs."""
+    """Engine wall time [s] (:func:`engine_time_estimate` without its basis)."""
+    return engine_time_estimate(case, params, engine_name)[0]
+
+
+#: the basis :func:`engine_time_estimate` gives when no run of the engine was ever measured
+BARE_BASIS = "from the bare engine's throughput, no run of this engine measured: a lower bound, decks run slower"
+
+
+def engine_time_estimate(case: Case, params: dict, engine_name: str) -> tuple[float, str]:
+    """(engine wall time [s], basis) estimated from the derived step count and particle count with
+    the cost model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps
+    (a + b n) / S(workers) per engine and scene); an engine never measured falls back to the
+    adapter's bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck
+    runs (the basis says so)."""
     eng = get_engine(engine_name)
     sc = params["scene"]
     n = sc.get("n", len(sc.get("ids", [])))
     steps = sc.get("total_steps", sc["steps"])
-    t, _basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
+    t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
     if t == t:         # not NaN: a measured model
-        return t
-    return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case))
+        return t, basis
+    return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case)), BARE_BASIS

@@ -411,3 +411,20 @@ def test_yade_wall_rows_a_later_segment_wrote_again_are_taken_once(tmp_path):
     np.save(tmp_path / "walls.yade.000000000000.npy", np.array([[10.0, 1], [20, 2], [30, 3]]))
     np.save(tmp_path / "walls.yade.000000000020.npy", np.array([[30.0, 3], [40, 4]]))
     assert wall_rows(tmp_path)[:, 0].tolist() == [10, 20, 30, 40]
+
+
+def test_analyze_of_a_case_directory_names_the_runs_in_it(tmp_path):
+    """`analyze runs/<case>` (the case's directory, not one run) said "no analyses asked for"."""
+    run = tmp_path / "shear_cell_smoke" / "liggghts-0123456789ab"
+    run.mkdir(parents=True)
+    (run / "frames.h5").write_bytes(b"")
+    one_message(cli("analyze", tmp_path / "shear_cell_smoke"), 2, "not a run directory", str(run))
+
+
+def test_an_estimate_without_measured_runs_says_it_is_a_lower_bound(tmp_path):
+    """An engine never measured on any scene is estimated from its bare throughput: the line says so
+    (the LAMMPS shear cell printed ~16 s for a case LIGGGHTS runs in 200 s)."""
+    out = cli("validate", case_file(tmp_path, "lmp", "engines: [lammps]\n"))
+    assert out.returncode == 0, out.stderr
+    line = next(l for l in out.stdout.splitlines() if l.strip().startswith("lammps:"))
+    assert "lower bound" in line, line
