@@ -69,6 +69,13 @@ def density_profile(position, radius, r_edges, z_edges, center=(0.0, 0.0), z_ref
     return {"n": count / vol, "phi": phi / vol, "count": count, "volume": vol}
 
 
+def _filled_height(position, radius, z_ref: float) -> tuple[float, float]:
+    """(lowest grain bottom, highest grain top) − z_ref [m] of one frame's present grains."""
+    ok = present(position)
+    z = position[ok, 2] - z_ref
+    return float(np.min(z - radius[ok])), float(np.max(z + radius[ok]))
+
+
 def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | None = None,
                      z_range=None, radial_z_range=None, axial_r_range=None, bins_r: int = 20, bins_z: int = 40,
                      at=None, control: str | None = None, stride: int | None = None, samples: int = 64) -> Result:
@@ -78,7 +85,9 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
     box), ``z_ref`` (height origin, seed 000: vanes' top edge), ``r_max`` (cell radius, default
     largest centre distance + its radius), ``z_range`` (z − z_ref range of the axial profile,
     default all), ``radial_z_range`` (z − z_ref slab for the radial profile; seed 000:
-    (0, 0.7e-3)), ``axial_r_range`` (radial range for the axial profile, default (0, r_max)),
+    (0, 0.7e-3); default: each frame's own filled height, from its lowest grain bottom to its
+    highest grain top, so that a compacted frame's φ(r) is not diluted by the empty height a
+    looser frame filled), ``axial_r_range`` (radial range for the axial profile, default (0, r_max)),
     ``bins_r``, ``bins_z``, ``samples`` (points per sphere for φ).
 
     Tables: ``axial`` (frame, control, z, n, phi), ``radial`` (frame, control, r, n, phi),
@@ -107,7 +116,6 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
         zz = sel[okf, 2] - z_ref
         z_range = (float(np.min(zz - rad[okf])), float(np.max(zz + rad[okf])))
     axial_r_range = axial_r_range or (0.0, r_max)
-    radial_z_range = radial_z_range or z_range
     z_edges = np.linspace(z_range[0], z_range[1], bins_z + 1)
     r_edges = np.linspace(0.0, r_max, bins_r + 1)
     ax, rad, mp = [], [], []
@@ -116,7 +124,8 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
         a = density_profile(p, frames.radius, np.array(axial_r_range, float), z_edges, center, z_ref, samples)
         ax.append(pd.DataFrame({"frame": k, "control": cvals[k], "z": 0.5 * (z_edges[1:] + z_edges[:-1]),
                                 "n": a["n"][0], "phi": a["phi"][0], "count": a["count"][0]}))
-        r = density_profile(p, frames.radius, r_edges, np.array(radial_z_range, float), center, z_ref, samples)
+        r = density_profile(p, frames.radius, r_edges, np.array(radial_z_range or _filled_height(p, frames.radius, z_ref),
+                                                                  float), center, z_ref, samples)
         rad.append(pd.DataFrame({"frame": k, "control": cvals[k], "r": 0.5 * (r_edges[1:] + r_edges[:-1]),
                                  "n": r["n"][:, 0], "phi": r["phi"][:, 0], "count": r["count"][:, 0]}))
         m = density_profile(p, frames.radius, r_edges, z_edges, center, z_ref, samples)
@@ -127,5 +136,6 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
                                       "map": pd.concat(mp, ignore_index=True)},
                   scalars={"center_x": center[0], "center_y": center[1], "z_ref": z_ref, "r_max": r_max, "control": cname},
                   options={"center": center, "z_ref": z_ref, "r_max": r_max, "z_range": list(z_range),
-                           "radial_z_range": list(radial_z_range), "bins_r": bins_r, "bins_z": bins_z},
+                           "radial_z_range": list(radial_z_range) if radial_z_range else "each frame's filled height",
+                           "bins_r": bins_r, "bins_z": bins_z},
                   plotter=plot_profiles)

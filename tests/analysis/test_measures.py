@@ -50,6 +50,29 @@ def test_profiles_default_range_covers_every_selected_frame(tmp_path):
     assert ax.query("frame == 1")["count"].sum() == 300
 
 
+def test_radial_profile_default_slab_is_each_frames_filled_height(tmp_path):
+    """A frame compacted into half the height it filled before: its radial φ(r) is averaged over
+    its own filled height, not the union with the looser frame's (which diluted the default
+    case's φ(r) to ~0.15 against ~0.55 in the sheared sample)."""
+    a = 2 * (0.5 * D)                               # simple cubic lattice of touching spheres
+    g = np.arange(12) * a
+    X, Y, Z = np.meshgrid(g, g, g, indexing="ij")
+    p0 = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    keep = np.hypot(p0[:, 0] - g.mean(), p0[:, 1] - g.mean()) < 5 * a
+    p0 = p0[keep]
+    p1 = p0 * [1, 1, 0.5] + [0, 0, 40 * D]         # overlapping spheres: twice the density
+    path = tmp_path / "frames.h5"
+    n = len(p0)
+    write_frames(path, np.arange(n), np.full(n, 0.5 * D), [0.0, 1.0], np.stack([p0, p1]))
+    res = analyze_profiles(Frames(path), center=(g.mean(), g.mean()), r_max=4 * a, bins_r=4, samples=256)
+    rad = res.tables["radial"]
+    phi0 = rad.query("frame == 0")["phi"].to_numpy()
+    phi1 = rad.query("frame == 1")["phi"].to_numpy()
+    # the bulk of a simple cubic packing: π/6, less the half-empty top and bottom layers' share
+    assert phi0.mean() == pytest.approx(np.pi / 6, rel=0.1)
+    assert phi1.mean() == pytest.approx(2 * phi0.mean(), rel=0.1)
+
+
 def test_mu_macro_disc_formula(shear_cell):
     assert mu_macro(3.0, 2.0, 0.5) == pytest.approx(1.5 * 3 / (0.5 * 2))
     assert mu_macro(-3.0, 2.0, 0.5, "ring") == pytest.approx(3.0)
