@@ -13,6 +13,7 @@ from orchestrator.case import load_case
 from orchestrator.compare.ladder import compare_rungs, rungs_for, single_contact_differences
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
+SCHEDULE_MINUTES = 2.5        #: the L0 rung on both engines (tests/conftest.py schedule_groups)
 
 
 def test_full_shear_cell_has_five_rungs_each_dropping_one_term():

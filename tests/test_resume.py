@@ -15,6 +15,7 @@ from resume_util import kill_run, rerun_resumes
 
 pytestmark = pytest.mark.engine
 REPO = Path(__file__).resolve().parents[1]
+SCHEDULE_MINUTES = 1.5        #: tests/conftest.py schedule_groups
 
 
 #: long enough to be killed after a restart on either engine (YADE is ~5x slower per step)

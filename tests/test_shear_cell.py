@@ -20,6 +20,7 @@ from shear_cell_protocol import check_smoke_protocol
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 SMOKE = CASES / "shear_cell_smoke.yaml"
+SCHEDULE_MINUTES = 2          #: the smoke protocol on both engines (tests/conftest.py schedule_groups)
 ENGINES = [e for e in ("liggghts", "yade") if shutil.which(e)]
 
 

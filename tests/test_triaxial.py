@@ -1,7 +1,8 @@
 """The membrane triaxial test (seed 001, issue 4) on both real engines, smoke case.
 
-One run per engine (about 30 s LIGGGHTS, 2-3 min YADE on one free core), plus a YADE run on a
-second packing (seed 2) and two short unstable runs for the monitors. Checks the floors of
+One run per engine (about 1.5 min LIGGGHTS, 6 min YADE on one free core), plus two short unstable
+runs for the monitors, and the triaxial notebook on the LIGGGHTS run; a YADE run on a second
+packing (seed 2) is in the slow tier (``-m slow``). Checks the floors of
 issue 4: confining pressure within 3 % of the target before axial loading, σ1/σ3 = 1 ± 0.05 after
 isotropic compression, the final axial strain as asked, no grain escaping the lateral boundary,
 volumetric strain measured two independent ways (boundary volume, convex hull of the grains)
@@ -18,11 +19,15 @@ import h5py
 import numpy as np
 import pytest
 
+from notebook_util import execute_notebook
 from orchestrator.case import load_case
 
 REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 ENGINES = ["liggghts", "yade"]
+#: one xdist group per engine (tests/conftest.py schedule_groups): the YADE smoke run takes ~6 min
+SPLIT_BY_ENGINE = True
+SCHEDULE_MINUTES = {"yade": 7, "liggghts": 3}
 
 
 @pytest.fixture(scope="module")
@@ -242,6 +247,20 @@ def test_monitors_watch_the_smoke_runs(runs, eng):
         assert "orch_monitor_engine()," in (out.run_dir / "script.py").read_text()
 
 
+@pytest.mark.engine
+@pytest.mark.parametrize("eng", ["liggghts"])
+def test_triaxial_notebook_runs(runs, eng, tmp_path):
+    """notebooks/triaxial_postprocessing.ipynb runs top to bottom on this file's LIGGGHTS smoke run
+    (the notebook's run_case finds it complete in the same runs directory and reuses it)."""
+    assert outcome(runs, eng).status == "complete"
+    nb = execute_notebook("triaxial_postprocessing.ipynb", runs["root"], tmp_path, timeout=1800)
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+    assert "complete" in text
+    images = sum(1 for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
+                 if "image/png" in o.get("data", {}))
+    assert images >= 2
+
+
 #: the smoke floors on a second packing (seed 2), YADE: before stage 1 ended without the drag
 #: (isotropic.drag_free_end) its lateral stress strayed 0.128; then 0.035 (Δε_v 0.010); with the
 #: preparation friction 0.1 (a dense sample) 0.017 (Δε_v 0.002); with the derived servo gain 0.015 (0.001)
@@ -262,6 +281,7 @@ def test_yade_lateral_stray_second_packing(yade_seed2):
 
 
 @pytest.mark.engine
+@pytest.mark.slow   # the same second packing (its run is the fixture's), out of the 15-minute suite
 def test_yade_volume_two_ways_second_packing(yade_seed2):
     with h5py.File(yade_seed2.run_dir / "frames.h5") as f:
         fr = f["frames"]
