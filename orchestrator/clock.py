@@ -6,6 +6,9 @@ Model (per engine and scene, fitted from completed runs)::
 
 - ``t_start`` [s]: process start-up and set-up (reading the packing and meshes, building the
   neighbour structures, the first dump), measured as engine time minus the engine's own loop time;
+- the engine time of a run is its CPU time per rank where the run recorded one
+  (``wall_time.engine_cpu``, from ``os.wait4``), its wall time otherwise: on a shared machine the
+  wall time grows with the load, the CPU time does not;
 - ``a`` [s/step]: cost per step independent of the particle count (mesh walls, servo and wall
   computes, Python callbacks in YADE decks, dumps amortised over the run);
 - ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration);
@@ -138,15 +141,28 @@ def _sample(run_dir: Path) -> RunSample | None:
     steps = int(s.get("steps_run") or s.get("steps") or 0)
     if n <= 0 or steps <= 0:
         return None
-    kind = s.get("scene") or ""
-    if not kind:
-        try:
-            kind = (yaml.safe_load((run_dir / "case.yaml").read_text()).get("scene") or {}).get("kind", "")
-        except (OSError, ValueError, AttributeError):
-            kind = ""
-    ranks = int(s.get("workers") or 1)
-    loop = wt.get("engine_loop") if isinstance(wt.get("engine_loop"), (int, float)) else wt["engine"]
-    return RunSample(s["engine"], kind, n, steps, max(ranks, 1), float(wt["engine"]), float(loop), str(run_dir))
+    # the scene's kind from the run's case (summary.json's "scene" is the scene's results for some
+    # scenes, e.g. the triaxial's stage figures, and the kind's name for others)
+    try:
+        kind = (yaml.safe_load((run_dir / "case.yaml").read_text()).get("scene") or {}).get("kind", "")
+    except (OSError, ValueError, AttributeError):
+        kind = ""
+    if not kind and isinstance(s.get("scene"), str):
+        kind = s["scene"]
+    ranks = max(int(s.get("workers") or 1), 1)
+    engine_s = float(wt["engine"])
+    # the engine's own loop time where its log gives one (0 or absent: not measured, e.g. YADE's)
+    loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
+        else engine_s
+    cpu = wt.get("engine_cpu")
+    if isinstance(cpu, (int, float)) and cpu > 0:
+        # the engine's CPU time per rank stands for its wall time on a quiet machine: the wall time
+        # of a run that shared its cores (other runs, a test suite) is longer by the load factor,
+        # its CPU time is not (MPI ranks poll while they wait: CPU ~ ranks x wall when quiet)
+        startup = max(engine_s - loop, 0.0)
+        engine_s = min(float(cpu) / ranks, engine_s)
+        loop = max(engine_s - startup, 0.0) if startup < engine_s else engine_s
+    return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir))
 
 
 def samples_from_runs(paths) -> list[RunSample]:

@@ -264,6 +264,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         write_json(run_dir / "summary.json", summary)
         raise
     timings["engine"] = time.perf_counter() - t1
+    if res.extra.get("cpu_s") is not None:
+        timings["engine_cpu"] = res.extra["cpu_s"]      # CPU time of the engine and its ranks [s]
     unstable = read_verdict(run_dir, params["dt"])
     if unstable is not None:
         return _mark_unstable(run_dir, summary, unstable, timings["engine"])
@@ -288,7 +290,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         summary["analysis"] = run_case_analyses(case, run_dir)
         summary["analysis_specs"] = case.analysis
         timings["analysis"] = time.perf_counter() - t3
-    timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop"))
+    timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop", "engine_cpu"))
     summary["wall_time"] = timings
     from .integrity import run_record
     summary["integrity"] = run_record(run_dir, summary.get("analysis"))
@@ -339,7 +341,8 @@ def _mark_unstable(run_dir, summary, unstable: dict, engine_time: float) -> RunO
     summary["status"] = "unstable"
     summary["unstable"] = unstable
     summary["wall_time"]["engine"] = engine_time
-    summary["wall_time"]["total"] = sum(v for k, v in summary["wall_time"].items() if k != "total")
+    summary["wall_time"]["total"] = sum(v for k, v in summary["wall_time"].items()
+                                        if k not in ("total", "engine_loop", "engine_cpu"))
     write_json(run_dir / "summary.json", summary)
     return RunOutcome(run_dir, "unstable", summary)
 

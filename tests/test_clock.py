@@ -71,3 +71,33 @@ def test_multi_rank_runs_alone_keep_the_assumed_efficiency():
     tp = fit(_runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=ASSUMED_PARALLEL_EFFICIENCY))
     assert tp.parallel_efficiency == ASSUMED_PARALLEL_EFFICIENCY and "no one-rank run" in tp.note
     assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-9)       # scaled back to one rank
+
+
+def test_a_triaxial_run_whose_summary_holds_its_scene_results_is_read(tmp_path):
+    """summary.json's "scene" holds the triaxial's stage figures (a dict), not its kind: the kind
+    comes from the run's case (bench_estimate.py failed on the CI runs: unhashable dict)."""
+    from orchestrator.clock import samples_from_runs
+    d = tmp_path / "triaxial_smoke" / "yade-0"
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text(json.dumps({
+        "engine": "yade", "status": "complete", "steps": 1000, "steps_run": 1000, "n_particles": 300,
+        "scene": {"isotropic_end": {"converged": True}}, "wall_time": {"engine": 5.0, "engine_loop": 0}}))
+    (d / "params.json").write_text(json.dumps({"scene": {"n": 300}}))
+    (d / "case.yaml").write_text("scene: {kind: triaxial}\n")
+    (s,) = samples_from_runs([tmp_path])
+    assert (s.engine, s.scene, s.n_particles, s.steps) == ("yade", "triaxial", 300, 1000)
+    assert s.loop_s == 5.0          # engine_loop 0: not measured (YADE), the engine time stands in
+
+
+def test_cpu_time_per_rank_stands_for_the_wall_time_of_a_loaded_run(tmp_path):
+    """A run that shared its cores: wall 300 s, CPU 200 s on 2 ranks -> 100 s of quiet engine time."""
+    from orchestrator.clock import samples_from_runs
+    d = tmp_path / "c" / "liggghts-0"
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text(json.dumps({
+        "engine": "liggghts", "status": "complete", "steps": 1000, "steps_run": 1000, "n_particles": 500,
+        "workers": 2, "wall_time": {"engine": 300.0, "engine_loop": 290.0, "engine_cpu": 200.0}}))
+    (d / "params.json").write_text(json.dumps({"scene": {"n": 500}}))
+    (d / "case.yaml").write_text("scene: {kind: shear_cell}\n")
+    (s,) = samples_from_runs([tmp_path])
+    assert s.engine_s == pytest.approx(100.0) and s.loop_s == pytest.approx(90.0)
