@@ -11,6 +11,7 @@ import json
 import math
 import os
 from pathlib import Path
+from .atomic import write_text
 
 # scipy (integrate, optimize: ~0.8 s to import) is imported where an integration is done, and the
 # integrations are remembered across processes (:func:`remembered`): `validate` within 2 s (#16)
@@ -70,7 +71,6 @@ def remembered(fn):
         memo[key] = value
         path = memo_path()
         try:
-            from .atomic import write_text
             path.parent.mkdir(parents=True, exist_ok=True)
             write_text(path, json.dumps({**_read_memo(path), key: value}, indent=0, sort_keys=True))
         except OSError:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from .frames import Frames, FramesError
 
 #: read files in blocks of this many bytes while hashing
 _BLOCK = 1 << 22
@@ -30,7 +31,6 @@ def file_record(path) -> dict:
 
 def frames_record(path) -> dict:
     """:func:`file_record` of a frames.h5 plus its frame and particle counts."""
-    from .frames import Frames
     fr = Frames(path)
     return {**file_record(path), "frames": fr.n_frames, "particles": fr.n_particles}
 
@@ -52,7 +52,6 @@ def verify_run(run_dir, summary: dict) -> list[tuple[str, str]]:
     """What is wrong with a complete run's recorded files: (file name relative to the run, problem)
     per missing, resized, altered or unreadable file (empty when all is well, or when the summary
     predates the record and frames.h5 opens)."""
-    from .frames import Frames, FramesError
     run_dir = Path(run_dir)
     rec = summary.get("integrity")
     problems = []

@@ -23,7 +23,7 @@ from engines.base import EngineError
 from engines.render import templates_hash
 
 from .atomic import write_json, write_text
-from .case import Case
+from .case import Case, case_from_dict
 from .derive import derive
 from .sizing import estimate_wall_time
 from .frames import Frames
@@ -32,6 +32,7 @@ from .params import Params, thaw
 from .registry import get_engine, get_scene
 from .resources import data_file
 from .stability.monitors import read_verdict
+from .integrity import verify_run, run_record
 
 
 @dataclass
@@ -168,7 +169,6 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     with _RunLock(run_dir, wait=True):
         old = read_summary(run_dir)
         if old and old.get("status") == "complete" and not force:
-            from .integrity import verify_run
             damaged = verify_run(run_dir, old)
             if any(not name.startswith("analysis") for name, _ in damaged):
                 _say(f"{run_dir}: the complete run is damaged, so it is redone: "
@@ -185,7 +185,6 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
                 old["analysis"] = run_case_analyses(case, run_dir)
                 old["analysis_specs"] = case.analysis
                 old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
-                from .integrity import run_record
                 old["integrity"] = run_record(run_dir, old["analysis"])
                 write_json(run_dir / "summary.json", old)
             return RunOutcome(run_dir, "complete", old, reused=True)
@@ -292,7 +291,6 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         timings["analysis"] = time.perf_counter() - t3
     timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop", "engine_cpu"))
     summary["wall_time"] = timings
-    from .integrity import run_record
     summary["integrity"] = run_record(run_dir, summary.get("analysis"))
     write_json(run_dir / "summary.json", summary)
     # only now, with the complete summary on disk, are the resume points no longer needed
@@ -397,7 +395,6 @@ def run_case_analyses(case: Case, run_dir: Path) -> dict:
 def _run_resolved(data: dict, source: str, engine_name: str, runs_root: str, force: bool, analyze: bool) -> dict:
     """Worker side of :func:`run_on_cluster`: rebuild the case from its resolved data (without the
     scheduler, so the worker runs it itself) and run it. Returns the outcome as plain data."""
-    from .case import case_from_dict
     data = dict(data, engine_options=dict(data.get("engine_options") or {}, scheduler=None))
     case = case_from_dict(data, source=source)
     out = run_case(case, engine_name, runs_root=runs_root, force=force, progress=False, analyze=analyze)

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from ..frames import Frames
+from ..ct.track import link
 
 __all__ = ["Source", "open_source", "choose_control", "states", "match_states", "Identity", "match_identity",
            "Alignment", "align", "kabsch"]
@@ -212,7 +213,6 @@ def match_identity(a: Frames, b: Frames, ka: int, kb: int, max_distance: float |
         same_radii = len(ia) > 0 and np.allclose(a.radius[ia], b.radius[ib], rtol=1e-6, atol=0)
         if use_ids or (enough and (same_radii or np.median(dist) <= max_distance)):
             return Identity(ia, ib, "ids", (ka, kb), max_distance, int(ok_a.sum() - len(ia)), int(ok_b.sum() - len(ib)))
-    from ..ct.track import link
     ra, rb = np.nonzero(ok_a)[0], np.nonzero(ok_b)[0]
     L = link(pa[ra], pb[rb], max_distance)
     la = np.nonzero(L.a_to_b >= 0)[0]

@@ -13,6 +13,10 @@ import pandas as pd
 
 from .align import Alignment, align, open_source
 from .measures import MEASURES, compute_measures
+from ..frames import Frames, write_frames
+from .grain import grain_errors
+from ..analysis._common import atomic_write_csv, atomic_write_json
+from .report import write_compare_report
 
 __all__ = ["Comparison", "compare", "substitution_notes", "AFFECTS"]
 
@@ -52,7 +56,6 @@ def substitution_notes(a, b) -> dict:
 
 def _transformed_copy(fr, transform, path: Path):
     """A copy of a frame set with positions (and contact points/normals/forces) moved by (R, t)."""
-    from ..frames import Frames, write_frames
     R, t = np.asarray(transform[0]), np.asarray(transform[1])
     pos = fr.position @ R.T + t
     per = {}
@@ -108,7 +111,6 @@ class Comparison:
     def write(self, out_dir, html: bool = True) -> dict:
         """Write ``comparison.csv``, ``grains_states.csv``/``grains.csv``, ``alignment.json``,
         every analysis table of both sides (``a_<measure>_<table>.csv`` …) and ``report.html``."""
-        from ..analysis._common import atomic_write_csv, atomic_write_json
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         files = {"table": atomic_write_csv(self.table, out / "comparison.csv")}
@@ -122,7 +124,6 @@ class Comparison:
             files["grains"] = atomic_write_csv(self.grain.tables["grains"], out / "grains.csv")
         files["summary"] = atomic_write_json(self.summary(), out / "comparison.json")
         if html:
-            from .report import write_compare_report
             files["html"] = write_compare_report(self, out / "report.html")
         self.out_dir, self.files = out, files
         return files
@@ -175,7 +176,6 @@ def compare(a, b, out_dir=None, measures=None, options: dict | None = None, cont
     table = pd.DataFrame(rows, columns=COLUMNS)
     grain, gerr = None, None
     if al.identity is not None and al.identity.n > 0:
-        from .grain import grain_errors
         try:
             grain = grain_errors(al, A.frames, fb, grain_atol_d50, grain_rtol)
         except Exception as exc:  # noqa: BLE001

@@ -23,6 +23,8 @@ from ..case import Case, load_case
 from ..registry import engine_names
 from ..runner import RunOutcome, run_case
 from .core import Comparison, compare
+from ..analysis._common import atomic_write_csv
+from .report import write_compare_report
 
 __all__ = ["CrossValidation", "crossval", "free_cores"]
 
@@ -116,8 +118,6 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
 
 
 def _write(cv: CrossValidation, out_dir: Path):
-    from ..analysis._common import atomic_write_csv
-    from .report import write_compare_report
     cmp = cv.comparison
     cmp.write(out_dir, html=False)
     atomic_write_csv(cv.wall_times, out_dir / "wall_times.csv")

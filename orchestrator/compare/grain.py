@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from ..analysis.plots import _fig
 
 __all__ = ["GrainComparison", "grain_errors"]
 
@@ -31,7 +32,6 @@ class GrainComparison:
     labels: tuple = ("A", "B")
 
     def plot(self):
-        from ..analysis.plots import _fig
         s = self.tables["states"]
         x = s["control_value"].to_numpy()
         ctl = self.options.get("control", "control")

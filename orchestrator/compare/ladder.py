@@ -35,6 +35,7 @@ from ..case import load_case
 from ..derive import derive
 from ..registry import engine_names, get_engine
 from ..stability.executor import get_executor, run_task
+from ..atomic import write_text
 
 __all__ = ["Rung", "RUNGS", "rungs_for", "LadderResult", "run_ladder", "compare_rungs", "FLOORS",
            "single_contact_differences", "plot_ladder"]
@@ -316,7 +317,6 @@ def plot_ladder(res: LadderResult):
 
 
 def write_ladder(res: LadderResult, out_dir: Path) -> dict:
-    from ..atomic import write_text
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {"comparison": write_text(out_dir / "ladder.csv", res.comparison.to_csv(index=False)),

@@ -17,6 +17,9 @@ import numpy as np
 import pandas as pd
 
 from ..results import key_results
+from ..analysis.plots import _fig
+from ..frames import Frames
+from ..analysis import run_analyses
 
 __all__ = ["fig_to_data_uri", "write_run_report", "write_compare_report", "run_checks", "DEFAULT_ANALYSES"]
 
@@ -233,7 +236,6 @@ def _status_class(v):
 
 
 def _walltime_fig(wt: dict):
-    from ..analysis.plots import _fig
     parts = {k: v for k, v in wt.items() if k not in ("total", "engine_loop") and isinstance(v, (int, float))}
     if "engine" in parts and isinstance(wt.get("engine_loop"), (int, float)):
         loop = wt["engine_loop"]
@@ -257,8 +259,6 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
     none, :data:`DEFAULT_ANALYSES` of the scene. ``rerun`` recomputes them.
     """
     import yaml
-    from ..frames import Frames
-    from ..analysis import run_analyses
     run_dir = Path(run_dir)
     if run_dir.name == "frames.h5":
         run_dir = run_dir.parent

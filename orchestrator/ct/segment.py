@@ -34,6 +34,8 @@ from scipy import ndimage
 from scipy.special import ndtr
 
 from .io import Scan
+from ._kernels import (basin_saddles, edt, extreme_candidates, grow_kernel, label_sizes, label_stats, region_sums,
+                       table_mask)
 
 __all__ = ["segment", "Segmentation", "contacts_from_labels", "gap_fraction", "branch_profile_min", "CONTACT_GAP", "face_pairs", "grow_labels", "distance_map", "SegmentationError"]
 
@@ -238,7 +240,6 @@ def segment(scan: Scan, sigma: float = 1.0, threshold: float | None = None, h: f
     """
     from skimage.filters import threshold_isodata
     from skimage.segmentation import watershed
-    from ._kernels import label_sizes, table_mask
 
     vs = scan.voxel_size
     v3 = vs ** 3
@@ -328,7 +329,6 @@ def _fill_small_pores(binary, max_voxels):
     """Fill enclosed pores (background components, 6-connected, not touching the volume border) of
     at most ``max_voxels`` voxels. One labelling of the background (the same holes as
     :func:`scipy.ndimage.binary_fill_holes`, without its iterated dilation from the border)."""
-    from ._kernels import label_sizes, table_mask
     lab, n = ndimage.label(~binary)
     if n == 0:
         return binary
@@ -349,7 +349,6 @@ def distance_map(binary) -> np.ndarray:
     The exact separable transform of :mod:`orchestrator.ct._kernels` (Felzenszwalb-Huttenlocher, numba):
     the same values as :func:`scipy.ndimage.distance_transform_edt` (tests/ct/test_edt.py), ~6x
     faster than scipy's feature transform on a 512^3 scan (benchmarks/bench_ct.py)."""
-    from ._kernels import edt
     return edt(binary)
 
 
@@ -360,7 +359,6 @@ def grow_labels(labels, distance=1.5):
     transform of the whole volume: one compiled pass (:func:`._kernels.grow_kernel`) that looks at
     the shells of equal distance in turn (two shells, 6 face and 12 edge neighbours, for the
     default 1.5)."""
-    from ._kernels import grow_kernel
     k = int(np.floor(distance))
     g = np.mgrid[-k:k + 1, -k:k + 1, -k:k + 1].reshape(3, -1)
     d2 = (g ** 2).sum(0)
@@ -449,7 +447,6 @@ def _merge_shallow_basins(basins, height, h, seeds):
     n = int(basins.max())
     if n == 0:
         return basins.astype(np.int32)
-    from ._kernels import basin_saddles
     flat_h = height.ravel()
     at = np.flatnonzero(seeds)
     peak = np.zeros(n + 1, np.float64)
@@ -491,7 +488,6 @@ def _hull_ratio(labels, n, nvox=None) -> np.ndarray:
     vertices (:func:`._kernels.extreme_candidates`); they are found for all grains at once and Qhull
     gets those."""
     from scipy.spatial import ConvexHull, QhullError
-    from ._kernels import extreme_candidates
     ends = extreme_candidates(np.ascontiguousarray(labels))
     pts = np.argwhere(ends).astype(np.float64)
     lab = labels[ends]
@@ -521,7 +517,6 @@ def _grain_table(seg: Segmentation, dist, over_ratio, under_ratio, under_hull=1.
     if n == 0:
         return pd.DataFrame(columns=["label", "x", "y", "z", "volume", "radius", "n_voxels", "z0", "y0", "x0",
                                      "z1", "y1", "x1", "inscribed_radius", "flag"])
-    from ._kernels import label_stats, region_sums
     # voxel count, bounding box, largest distance-map value: one compiled pass
     cnt, box, peak = label_stats(np.ascontiguousarray(labels), np.ascontiguousarray(dist, dtype=np.float32), n)
     nvox, bbox, inscribed = cnt[1:], box[1:], peak[1:]

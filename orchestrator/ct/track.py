@@ -22,6 +22,8 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse.csgraph import min_weight_full_bipartite_matching
 from scipy.spatial import cKDTree
+from .io import check_series
+from .synth import twist
 
 __all__ = ["Links", "link", "estimate_rotation", "RotationField", "match_invariants", "track_sequence"]
 
@@ -177,7 +179,6 @@ class RotationField:
 
     def predict(self, position) -> np.ndarray:
         """Positions (N, 3) [m] rotated about the axis by the local angle: the prediction for :func:`link`."""
-        from .synth import twist
         p = np.asarray(position, float)
         return twist(p, self.centre, self.angle_at(p))
 
@@ -193,7 +194,6 @@ def estimate_rotation(scan_a, scan_b, centre=None, radius=None, n_rings: int = 4
     refined by a parabola, within ``max_angle`` [rad], gives the local rotation. ``smooth`` slabs
     are median-filtered along the height to reject outliers (1 = no smoothing).
     """
-    from .io import check_series
     check_series([scan_a, scan_b])
     vs = scan_a.voxel_size
     nz, ny, nx = scan_a.shape

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.optimize import curve_fit
 
 from .sweep import sweep
+from ..analysis._common import save_figure
 
 
 def saturating(mu, mu0, A, mu_c):
@@ -115,5 +116,4 @@ def plot_calibration(df, fits, target, inv, path):
     ax.set_ylabel("steady-state mu_macro = |F_x|/|F_z| [-]")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    from ..analysis._common import save_figure
     return save_figure(fig, path)

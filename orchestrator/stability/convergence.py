@@ -25,6 +25,7 @@ from ..case import CaseError, load_case
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
 from .sweep import _finished, nested
+from ..analysis._common import save_figure
 
 KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count")
 _RATE_FIELDS = ("inertial_number", "compression_inertial_number", "quasi_static_number")
@@ -202,5 +203,4 @@ def plot_ladder(df, knob: str, path, target_error: float):
     ax.set_title(f"error against run time, knob {knob} (reference = finest)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    from ..analysis._common import save_figure
     return save_figure(fig, path)

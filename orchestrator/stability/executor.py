@@ -12,6 +12,11 @@ import traceback
 from abc import ABC, abstractmethod
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterable, Iterator
+from ..case import load_case
+from ..runner import run_case
+from .observables import observables
+from ..registry import get_engine
+from ..derive import derive
 
 
 def run_task(task: dict) -> dict:
@@ -22,9 +27,6 @@ def run_task(task: dict) -> dict:
     import time
     t0 = time.perf_counter()
     try:
-        from ..case import load_case
-        from ..runner import run_case
-        from .observables import observables
         case = load_case(task["case"], overrides=task.get("overrides") or None)
         out = run_case(case, task["engine"], runs_root=task["runs_root"], force=task.get("force", False),
                        progress=False, analyze=task.get("analyze", False))
@@ -76,14 +78,11 @@ def warm_worker(case_path=None, engines=(), overrides=None) -> None:
     (a LIGGGHTS start-up is ~0.5 s) and the case's derivation (the restitution inversion is
     cached per process). Errors are left to the runs themselves."""
     try:
-        from engines import get_engine
         for e in engines or ():
             eng = get_engine(e)
             if eng.available():
                 eng.version()
         if case_path is not None:
-            from ..case import load_case
-            from ..derive import derive
             derive(load_case(case_path, overrides=overrides or None))
     except Exception:
         pass

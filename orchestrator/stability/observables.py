@@ -14,10 +14,15 @@ import math
 from pathlib import Path
 
 import numpy as np
+from ..frames import Frames
+from ..scenes.plane_shear import mu_macro_series, steady_mu
+from ..analysis.friction import analyze_friction
+from ..analysis import parse_specs
+from ..analysis.shearband import analyze_shearband
+from ..analysis.triaxial import analyze_triaxial
 
 
 def observables(case, run_dir) -> dict:
-    from ..frames import Frames
     run_dir = Path(run_dir)
     fr = Frames(run_dir / "frames.h5")
     params = json.loads((run_dir / "params.json").read_text())
@@ -35,7 +40,6 @@ def observables(case, run_dir) -> dict:
 
 
 def _plane_shear(case, fr, params) -> dict:
-    from ..scenes.plane_shear import mu_macro_series, steady_mu
     st = steady_mu(fr, params)
     df = mu_macro_series(fr)
     sc = params["scene"]
@@ -49,12 +53,10 @@ def _plane_shear(case, fr, params) -> dict:
 
 
 def _shear_cell(case, fr, params) -> dict:
-    from ..analysis.friction import analyze_friction
     out = {}
     sc = params["scene"]
     # mu_macro as the case's own `friction` analysis computes it (same radius: the sample's, by
     # default; same steady window), so that the ladder and the run report print the same number
-    from ..analysis import parse_specs
     opts = {"torque_wall": "rotating", "force_wall": "lower_piston", "steady_control": "angle",
             "steady_from": 0.5 * case.scene.final_angle}
     opts.update(next((o for n, o in parse_specs(case.analysis) if n == "friction"), {}))
@@ -64,7 +66,6 @@ def _shear_cell(case, fr, params) -> dict:
     except Exception as exc:
         out["mu_macro_error"] = str(exc)
     try:
-        from ..analysis.shearband import analyze_shearband
         res = analyze_shearband(fr, **next((o for n, o in parse_specs(case.analysis) if n == "shearband"), {}))
         # steady band (seed 000 Fig. 2): the r-averaged steady position and width; a single
         # frame pair's fit (z_sb_last) scatters by ~20 um on the small case
@@ -101,7 +102,6 @@ TRIAXIAL_STRAINS = (0.01, 0.02, 0.05, 0.10, 0.15)
 def _triaxial(case, fr) -> dict:
     """σ1/σ3 (smoothed) and ε_v (compression positive) at the axial strains of
     :data:`TRIAXIAL_STRAINS` reached by the run, and the peak and residual friction angles [deg]."""
-    from ..analysis.triaxial import analyze_triaxial
     res = analyze_triaxial(fr)
     c = res.tables["curves"]
     ea = c["axial_strain"].to_numpy()
