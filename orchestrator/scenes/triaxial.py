@@ -59,7 +59,7 @@ from ..clumps import bounding_radius, equivalent_scale, load_library, mass_prope
 from ..derive import DerivationError
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
-from ..psd import lognormal_mu_for_mean, truncated_lognormal
+from ..psd import Cylinder, lognormal_mu_for_mean, relax_overlaps, truncated_lognormal
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base
@@ -756,35 +756,9 @@ def pack_cylinder(r: np.ndarray, R: float, H: float, rng: np.random.Generator, t
     th = rng.random(n) * 2 * np.pi
     rho = np.sqrt(u) * np.maximum(R - r, 0)
     pos = np.column_stack([rho * np.cos(th), rho * np.sin(th), r + rng.random(n) * np.maximum(H - 2 * r, 0)])
-    vol = r ** 3
     rmax = r.max()
-    rmin = r.min()
-    for it in range(max_iter):
-        tree = cKDTree(pos)
-        pairs = tree.query_pairs(2 * rmax, output_type="ndarray")
-        i, j = pairs[:, 0], pairs[:, 1]
-        dv = pos[j] - pos[i]
-        dist = np.linalg.norm(dv, axis=1)
-        ov = r[i] + r[j] - dist
-        m = ov > 0
-        worst = ov[m].max() / rmin if m.any() else 0.0
-        if worst < tol:
-            break
-        i, j, dv, dist, ov = i[m], j[m], dv[m], dist[m], ov[m]
-        nvec = dv / np.maximum(dist, 1e-300)[:, None]
-        wi = vol[j] / (vol[i] + vol[j])
-        step = 0.55 * ov                          # slight over-relaxation
-        disp = np.zeros_like(pos)
-        np.add.at(disp, i, -(step * wi)[:, None] * nvec)
-        np.add.at(disp, j, (step * (1 - wi))[:, None] * nvec)
-        pos += disp
-        # project into the cylinder
-        rr = np.hypot(pos[:, 0], pos[:, 1])
-        lim = R - r
-        out = rr > lim
-        pos[out, :2] *= (lim[out] / rr[out])[:, None]
-        pos[:, 2] = np.clip(pos[:, 2], r, H - r)
-    else:
+    pos, it, worst = relax_overlaps(pos, r, Cylinder(R, 0.0, H), tol, r.min(), max_iter)
+    if worst >= tol:
         raise RuntimeError(f"packing {n} grains at the requested packing fraction did not converge "
                            f"(largest overlap {worst:.3g} r_min after {max_iter} iterations); lower packing_fraction")
     # remove the remaining overlaps exactly: expand about the centre
