@@ -1,19 +1,24 @@
-"""A triaxial run killed during axial loading (orchestrator and engine) resumes from its last
-restart (LIGGGHTS) or checkpoint (YADE) and ends like an uninterrupted run: the same series rows
-and frames (no step twice, none missing), the asked axial strain, the same stage-1 end, and σ3 stray
-and final σ1/σ3 within the spread that chaos gives (docs/triaxial.md, Resume).
+"""A triaxial run killed (orchestrator and engine) resumes from its last restart (LIGGGHTS) or
+checkpoint (YADE) and goes on exactly as an uninterrupted run (docs/engines.md, Resume; issue #16):
 
-Tolerances (smoke case, measured): the granular sample is chaotic, and neither engine resumes
-bit-exactly here (LIGGGHTS: the platen-grain contacts of the restart step come back with a 3e-4
-relative force difference; YADE: the re-initialised collider and the contact order). An
-ulp-sized perturbation at the start of loading alone moved the final 10-row σ1/σ3 of the
-LIGGGHTS smoke run by 3 %, and resumes from four points spread it by up to 6.5 %; YADE's spread is
-in docs/triaxial.md. The final σ1/σ3 (mean of the last 10 rows) must agree within 10 %, the
-smoothed σ3 stray within 0.03 (the floor is 0.10).
+* ``test_killed_triaxial_resumes_exactly`` (default suite, both engines; the cheapest exact check):
+  an uninterrupted run to its second (YADE) or third (LIGGGHTS) resume point T, killed there; a
+  second run killed at a random step before T and run again until T: every frame up to T once, at the
+  uninterrupted run's steps, positions equal (bound 1e-9 r_min; bit-identical is what is measured),
+  the ``triax.txt`` rows up to T equal. Both decks run in segments that end at their resume points
+  and start again from the file written there (LIGGGHTS: ``clear`` + ``read_restart``; YADE:
+  ``O.save`` + ``O.load``), in an uninterrupted run as in a resumed one.
+* ``test_killed_triaxial_resumes`` (LIGGGHTS default, YADE slow): killed during axial loading, run
+  to the end: the same series rows and frames (no step twice, none missing), the asked axial
+  strain, the same stage-1 end, and σ3 stray and final σ1/σ3 within the spread chaos gives (a
+  looser, whole-run check kept from before the segments: the final σ1/σ3, mean of the last 10 rows,
+  within 10 %, the smoothed σ3 stray within 0.03; the floor is 0.10).
 """
 from __future__ import annotations
 
 import json
+import random
+import re
 import subprocess
 import sys
 import time
@@ -22,14 +27,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from engines.lammps_dump import read_binary_dump
+from engines.liggghts.segments import dump_segments
+from engines.yade.output import chunk_files
 from orchestrator.frames import Frames
-from resume_util import kill_run, rerun_resumes
+from resume_util import engine_step, kill_run, rerun_resumes, wait_until
 
 pytestmark = pytest.mark.engine
 REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 #: final σ1/σ3 (last 10 rows) relative, smoothed σ3 stray absolute (module docstring)
 RATIO_TOL, STRAY_TOL = 0.10, 0.03
+#: largest position difference / r_min between a resumed and an uninterrupted run, at any frame: exact
+EXACT = 1e-9
 
 
 def orchestrator(*args):
@@ -137,3 +147,87 @@ def test_killed_triaxial_resumes(engine, tmp_path, engines_installed):
     print(f"\n{engine}: resumed at step {point}, resumed run {resumed_wall:.1f} s wall; "
           f"final sigma1/sigma3 {m['final_ratio']:.4f} vs {mr['final_ratio']:.4f}, "
           f"stray {m['stray']:.4f} vs {mr['stray']:.4f}")
+
+
+def _resume_points(engine: str, run_dir: Path) -> list[int]:
+    """Steps of the resume points written so far: LIGGGHTS restart files (each with its state line),
+    YADE checkpoints (logged once saved)."""
+    if engine == "liggghts":
+        from engines.liggghts.triaxial import read_restart_states
+        states = read_restart_states(run_dir)
+        return sorted(s for s in states if (run_dir / "restart" / f"state.{s}.restart").exists())
+    try:
+        text = (run_dir / "engine.log").read_text(errors="replace")
+    except OSError:
+        return []
+    return [int(x) for x in re.findall(r"^CHECKPOINT iter (\d+)", text, flags=re.M)]
+
+
+def _raw_output(engine: str, run_dir: Path, upto: int):
+    """What the engine wrote up to step ``upto``: {step: positions (n, 3) [m] in id order}, how often
+    each step was written, and the ``triax.txt`` rows. LIGGGHTS' segments repeat the frame of their
+    first step (the reader keeps the later copy); YADE writes each frame once."""
+    frames, count = {}, {}
+    if engine == "liggghts":
+        cols = json.loads((run_dir / "dump" / "columns.json").read_text())
+        xi, ii = [cols.index(c) for c in ("x", "y", "z")], cols.index("id")
+        for step, a in read_binary_dump(dump_segments(run_dir), len(cols)):
+            if step <= upto:
+                frames[step] = a[np.argsort(a[:, ii])][:, xi]
+                count[step] = 1
+    else:
+        for c in chunk_files(run_dir):
+            with np.load(c) as z:
+                for k, it in enumerate(z["iter"].astype(int)):
+                    if it <= upto:
+                        count[it] = count.get(it, 0) + 1
+                        frames.setdefault(int(it), z["position"][k])
+    rows = np.loadtxt(run_dir / "triax.txt", comments="#", ndmin=2)
+    return frames, count, rows[rows[:, 0] <= upto]
+
+
+@pytest.mark.parametrize("engine", ["liggghts", "yade"])
+def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    cmd = lambda runs: orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(runs), "--quiet")
+    n_points = 3 if engine == "liggghts" else 2          # LIGGGHTS' first one ends the pressure ramp
+    # 1. uninterrupted to its n-th resume point T, then killed there
+    ref = subprocess.Popen(cmd(tmp_path / "ref"), **quiet)
+    ref_dir = lambda: next(iter((tmp_path / "ref").glob(f"triaxial_smoke/{engine}-*")), None)
+    wait_until(ref, lambda: ref_dir() and len(_resume_points(engine, ref_dir())) >= n_points, 900,
+               f"resume point {n_points} of the uninterrupted run")
+    T = _resume_points(engine, ref_dir())[n_points - 1]
+    kill_run(ref, ref_dir())
+    # 2. killed at a random step between the first resume point and T ...
+    runs = tmp_path / "runs"
+    proc = subprocess.Popen(cmd(runs), **quiet)
+    run_dir = lambda: next(iter(runs.glob(f"triaxial_smoke/{engine}-*")), None)
+    wait_until(proc, lambda: run_dir() and _resume_points(engine, run_dir()), 900, "a first resume point")
+    first = _resume_points(engine, run_dir())[0]
+    kill_at = random.randint(first + 1, T - 1)
+    wait_until(proc, lambda: (engine_step(run_dir(), engine) or 0) >= kill_at, 900, f"step {kill_at}")
+    kill_run(proc, run_dir())
+    # 3. ... and run again: it resumes; killed once it has passed T
+    again = subprocess.Popen(cmd(runs), **quiet)
+    wait_until(again, lambda: (run_dir() / ("resume.in" if engine == "liggghts" else "resume.py")).exists(), 120,
+               "a resumed deck")
+    wait_until(again, lambda: T in _resume_points(engine, run_dir()), 900, f"resume point {T} of the resumed run")
+    kill_run(again, run_dir())
+    log = (run_dir() / "engine.log").read_text(errors="replace")
+    assert ("read_restart" in log) if engine == "liggghts" else ("RESUMED at iter" in log)
+    summary = json.loads((run_dir() / "summary.json").read_text())
+    resumed_at = summary["resumed_from"].get("step", "the checkpoint") if summary.get("resumed_from") else None
+    assert resumed_at is not None, "the second run started afresh instead of resuming"
+
+    want, n_want, rows_want = _raw_output(engine, ref_dir(), T)
+    got, n_got, rows_got = _raw_output(engine, run_dir(), T)
+    assert sorted(got) == sorted(want) and T in got, (sorted(got), sorted(want))
+    assert set(n_got.values()) == {1} and set(n_want.values()) == {1}, "a frame written twice"
+    r_min = float(np.loadtxt(ref_dir() / "particles.txt", ndmin=2)[:, 1].min())
+    err = max(float(np.abs(got[s] - want[s]).max()) for s in want) / r_min
+    print(f"\n{engine}: killed at step {kill_at}, resumed from {resumed_at}, compared to step {T}: "
+          f"{len(got)} frames, max |dx| = {err:.3g} r_min; {len(rows_got)} series rows")
+    assert err <= EXACT, f"{err:.3g} r_min (killed at step {kill_at}, resumed from {resumed_at})"
+    # the series: the same rows, each step once, equal
+    assert np.all(np.diff(rows_got[:, 0]) > 0)
+    np.testing.assert_array_equal(rows_got, rows_want)
