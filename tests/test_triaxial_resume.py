@@ -2,8 +2,8 @@
 checkpoint (YADE) and goes on exactly as an uninterrupted run (docs/engines.md, Resume; issue #16):
 
 * ``test_killed_triaxial_resumes_exactly`` (default suite, both engines; the cheapest exact check):
-  an uninterrupted run to its second (YADE) or third (LIGGGHTS) resume point T, killed there; a
-  second run killed at a random step before T and run again until T: every frame up to T once, at the
+  an uninterrupted run to its third resume point T, killed there; a second run killed at a random
+  step after its first resume point and run again until T: every frame up to T once, at the
   uninterrupted run's steps, positions equal (bound 1e-9 r_min; bit-identical is what is measured),
   the ``triax.txt`` rows up to T equal. Both decks run in segments that end at their resume points
   and start again from the file written there (LIGGGHTS: ``clear`` + ``read_restart``; YADE:
@@ -190,13 +190,15 @@ def _raw_output(engine: str, run_dir: Path, upto: int):
 def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
     quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     cmd = lambda runs: orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(runs), "--quiet")
-    n_points = 3 if engine == "liggghts" else 2          # LIGGGHTS' first one ends the pressure ramp
+    n_points = 3
     # 1. uninterrupted to its n-th resume point T, then killed there
     ref = subprocess.Popen(cmd(tmp_path / "ref"), **quiet)
     ref_dir = lambda: next(iter((tmp_path / "ref").glob(f"triaxial_smoke/{engine}-*")), None)
     wait_until(ref, lambda: ref_dir() and len(_resume_points(engine, ref_dir())) >= n_points, 900,
                f"resume point {n_points} of the uninterrupted run")
-    T = _resume_points(engine, ref_dir())[n_points - 1]
+    points = _resume_points(engine, ref_dir())
+    T = points[n_points - 1]
+    thermo_every = json.loads((ref_dir() / "params.json").read_text())["scene"]["steps"] // 200
     kill_run(ref, ref_dir())
     # 2. killed at a random step between the first resume point and T ...
     runs = tmp_path / "runs"
@@ -204,7 +206,9 @@ def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
     run_dir = lambda: next(iter(runs.glob(f"triaxial_smoke/{engine}-*")), None)
     wait_until(proc, lambda: run_dir() and _resume_points(engine, run_dir()), 900, "a first resume point")
     first = _resume_points(engine, run_dir())[0]
-    kill_at = random.randint(first + 1, T - 1)
+    # before the second resume point: the log reports the step every thermo_every steps, so the engine
+    # may be up to that far on when it is killed (the run must resume before T)
+    kill_at = random.randint(first + 1, max(first + 1, points[1] - thermo_every - 100))
     wait_until(proc, lambda: (engine_step(run_dir(), engine) or 0) >= kill_at, 900, f"step {kill_at}")
     kill_run(proc, run_dir())
     # 3. ... and run again: it resumes; killed once it has passed T
@@ -214,14 +218,19 @@ def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
     wait_until(again, lambda: T in _resume_points(engine, run_dir()), 900, f"resume point {T} of the resumed run")
     kill_run(again, run_dir())
     log = (run_dir() / "engine.log").read_text(errors="replace")
-    assert ("read_restart" in log) if engine == "liggghts" else ("RESUMED at iter" in log)
     summary = json.loads((run_dir() / "summary.json").read_text())
-    resumed_at = summary["resumed_from"].get("step", "the checkpoint") if summary.get("resumed_from") else None
-    assert resumed_at is not None, "the second run started afresh instead of resuming"
+    assert summary.get("resumed_from"), "the second run started afresh instead of resuming"
+    if engine == "liggghts":
+        resumed_at = summary["resumed_from"]["step"]
+        assert f"read_restart restart/state.{resumed_at}.restart" in log
+    else:
+        resumed_at = int(re.search(r"^RESUMED at iter (\d+)", log, flags=re.M).group(1))
+    assert first <= resumed_at < T
 
     want, n_want, rows_want = _raw_output(engine, ref_dir(), T)
     got, n_got, rows_got = _raw_output(engine, run_dir(), T)
-    assert sorted(got) == sorted(want) and T in got, (sorted(got), sorted(want))
+    # frames up to T (YADE's are stamped one step after its checkpoint multiples), some after the resume
+    assert sorted(got) == sorted(want) and max(got) > resumed_at, (sorted(got), sorted(want), resumed_at)
     assert set(n_got.values()) == {1} and set(n_want.values()) == {1}, "a frame written twice"
     r_min = float(np.loadtxt(ref_dir() / "particles.txt", ndmin=2)[:, 1].min())
     err = max(float(np.abs(got[s] - want[s]).max()) for s in want) / r_min
@@ -229,5 +238,5 @@ def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
           f"{len(got)} frames, max |dx| = {err:.3g} r_min; {len(rows_got)} series rows")
     assert err <= EXACT, f"{err:.3g} r_min (killed at step {kill_at}, resumed from {resumed_at})"
     # the series: the same rows, each step once, equal
-    assert np.all(np.diff(rows_got[:, 0]) > 0)
+    assert np.all(np.diff(rows_got[:, 0]) > 0) and rows_got[-1, 0] > resumed_at
     np.testing.assert_array_equal(rows_got, rows_want)
