@@ -8,11 +8,10 @@ checkpoint (YADE) and goes on exactly as an uninterrupted run (docs/engines.md, 
   the ``triax.txt`` rows up to T equal. Both decks run in segments that end at their resume points
   and start again from the file written there (LIGGGHTS: ``clear`` + ``read_restart``; YADE:
   ``O.save`` + ``O.load``), in an uninterrupted run as in a resumed one.
-* ``test_killed_triaxial_resumes`` (LIGGGHTS default, YADE slow): killed during axial loading, run
-  to the end: the same series rows and frames (no step twice, none missing), the asked axial
-  strain, the same stage-1 end, and σ3 stray and final σ1/σ3 within the spread chaos gives (a
-  looser, whole-run check kept from before the segments: the final σ1/σ3, mean of the last 10 rows,
-  within 10 %, the smoothed σ3 stray within 0.03; the floor is 0.10).
+* ``test_killed_triaxial_resumes`` (slow, both engines): killed during axial loading and run to the
+  end, against a whole uninterrupted run: the same series rows, equal, and frames (no step twice,
+  none missing), positions equal at every frame (1e-9 r_min), the same stage-1 end, the asked axial
+  strain.
 """
 from __future__ import annotations
 
@@ -36,8 +35,6 @@ from resume_util import engine_step, kill_run, rerun_resumes, wait_until
 pytestmark = pytest.mark.engine
 REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
-#: final σ1/σ3 (last 10 rows) relative, smoothed σ3 stray absolute (module docstring)
-RATIO_TOL, STRAY_TOL = 0.10, 0.03
 #: largest position difference / r_min between a resumed and an uninterrupted run, at any frame: exact
 EXACT = 1e-9
 
@@ -81,13 +78,17 @@ def _metrics(run_dir: Path) -> dict:
             "final_axial_strain": float(a["axial_strain"][-1])}
 
 
-@pytest.mark.parametrize("engine", ["liggghts", pytest.param("yade", marks=pytest.mark.slow)])
+@pytest.mark.slow(reason="two whole smoke runs, one after the other (LIGGGHTS ~2 x 3.5 min, YADE longer on the "
+                        "shared machine); the default suite's exact check is test_killed_triaxial_resumes_exactly")
+@pytest.mark.parametrize("engine", ["liggghts", "yade"])
 def test_killed_triaxial_resumes(engine, tmp_path, engines_installed):
     runs, ref_runs = tmp_path / "runs", tmp_path / "ref"
     quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    # the uninterrupted reference runs alongside (two single-threaded engines)
-    ref = subprocess.Popen(orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(ref_runs), "--quiet"),
-                           **quiet)
+    # the uninterrupted reference first (one engine at a time on the shared machine)
+    done = subprocess.run(orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(ref_runs), "--quiet"),
+                          timeout=3600, **quiet)
+    assert done.returncode == 0
+    ref_dir = next(ref_runs.glob(f"triaxial_smoke/{engine}-*"))
     proc = subprocess.Popen(orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(runs), "--quiet"),
                             start_new_session=True, **quiet)
     t0, run_dir, point = time.time(), None, None
@@ -111,42 +112,34 @@ def test_killed_triaxial_resumes(engine, tmp_path, engines_installed):
     if engine == "liggghts":
         st = summary["resumed_from"]["scene_state"]
         assert st["stage"] == 2 and summary["resumed_from"]["step"] >= st["shear_start"]
-        assert "SHEAR resumed at step" in log
+        assert "SHEAR from step %d" % summary["resumed_from"]["step"] in log
     else:
         assert "RESUMED at iter" in log and ", stage 2" in log.split("RESUMED at iter")[-1].splitlines()[0]
 
-    assert ref.wait(timeout=2400) == 0
-    ref_dir = next(ref_runs.glob(f"triaxial_smoke/{engine}-*"))
-    # the series: the same rows (steps) as the uninterrupted run, none twice, none missing
+    # the series: the same rows as the uninterrupted run, none twice, none missing, equal
     a, b = _series(run_dir), _series(ref_dir)
     np.testing.assert_array_equal(a[:, 0], b[:, 0])
     steps = a[:, 0]
     assert np.all(np.diff(steps[:-1]) > 0) and steps[-1] >= steps[-2]   # YADE's final row may repeat the last
-    # stage 1 ran before the kill: its end is the uninterrupted run's
+    np.testing.assert_array_equal(a, b)
     iso, iso_ref = summary["scene"]["isotropic_end"], json.loads((ref_dir / "summary.json").read_text())["scene"]["isotropic_end"]
-    for k in ("sigma1", "sigma3", "steps"):
-        assert iso[k] == pytest.approx(iso_ref[k], rel=1e-9), (k, iso, iso_ref)
-    # frames: strictly increasing steps, the uninterrupted run's count and steps
+    assert iso == iso_ref
+    # frames: strictly increasing steps, the uninterrupted run's, positions equal at every frame
     fa, fb = Frames(run_dir), Frames(ref_dir)
     assert np.all(np.diff(fa.step) > 0)
-    assert fa.n_frames == fb.n_frames
     np.testing.assert_array_equal(fa.step, fb.step)
-    k_before = int(np.searchsorted(fa.step, point, side="right"))   # frames written before the resume point
-    np.testing.assert_allclose(fa.position[:k_before], fb.position[:k_before], rtol=0, atol=1e-12)
-    if engine == "yade":             # the membrane frames include those from before the kill
+    r_min = float(fb.radius.min())
+    err = float(np.nanmax(np.abs(fa.position - fb.position))) / r_min
+    assert err <= EXACT, f"{err:.3g} r_min after resuming at step {point}"
+    if engine == "yade":             # the membrane frames, those from before the kill too
         ma = np.load(run_dir / "dump" / "membrane.npz")
         mb = np.load(ref_dir / "dump" / "membrane.npz")
         np.testing.assert_array_equal(ma["iter"], mb["iter"])
-        kb = int(np.searchsorted(ma["iter"], point, side="right"))
-        np.testing.assert_allclose(ma["position"][:kb], mb["position"][:kb], rtol=0, atol=1e-12)
-    # the asked strain, and the loading's σ3 stray and final σ1/σ3 within chaos' spread
-    m, mr = _metrics(run_dir), _metrics(ref_dir)
+        np.testing.assert_array_equal(ma["position"], mb["position"])
+    m = _metrics(run_dir)
     assert m["final_axial_strain"] == pytest.approx(0.05, rel=0.002)
-    assert abs(m["final_ratio"] / mr["final_ratio"] - 1) <= RATIO_TOL, (m, mr)
-    assert abs(m["stray"] - mr["stray"]) <= STRAY_TOL, (m, mr)
-    print(f"\n{engine}: resumed at step {point}, resumed run {resumed_wall:.1f} s wall; "
-          f"final sigma1/sigma3 {m['final_ratio']:.4f} vs {mr['final_ratio']:.4f}, "
-          f"stray {m['stray']:.4f} vs {mr['stray']:.4f}")
+    print(f"\n{engine}: resumed at step {point}, resumed run {resumed_wall:.1f} s wall; {fa.n_frames} frames, "
+          f"max |dx| = {err:.3g} r_min; final sigma1/sigma3 {m['final_ratio']:.4f}")
 
 
 def _resume_points(engine: str, run_dir: Path) -> list[int]:
