@@ -33,6 +33,7 @@ from orchestrator.frames import Frames
 from resume_util import engine_step, kill_run, rerun_resumes, wait_until
 
 pytestmark = pytest.mark.engine
+SCHEDULE_MINUTES = 2          #: the exact check on both engines, ~55 s each (tests/conftest.py schedule_groups)
 REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 #: largest position difference / r_min between a resumed and an uninterrupted run, at any frame: exact
