@@ -45,7 +45,9 @@ def test_seed_law_deck_terms(tmp_path):
     for term in ("dmt", "damping viscoelastic", "tangential linear_history", "rolling sds", "twisting sds"):
         assert term in pair, term
     walls = [line for line in deck.splitlines() if "wall/gran/region" in line and line.startswith("fix")]
-    assert len(walls) == 17                           # 2 x (face, plate, 6 vanes) + sidewall
+    # 2 x (face, plate, 6 vanes) + sidewall, defined again in every segment of the deck
+    segments = sum(line.startswith(("read_data", "read_restart")) for line in deck.splitlines())
+    assert len({w.split()[1] for w in walls}) == 17 and len(walls) == 17 * segments
     for w in walls:
         assert "hertz/material" in w and "tangential linear_nohistory 0.0 0.0" in w
         assert "dmt" not in w and "rolling" not in w and "twisting" not in w
