@@ -30,3 +30,24 @@ def rerun_resumes(cmd: list[str], run_dir: Path, timeout: float) -> dict:
     assert summary["status"] == "complete"
     assert summary["resumed_from"], "the second run started afresh instead of resuming"
     return summary
+
+
+def engine_step(run_dir: Path, engine: str) -> int | None:
+    """The last step the engine reported in its log (LIGGGHTS thermo lines, YADE PROGRESS lines)."""
+    from engines import get_engine
+    eng = get_engine(engine)
+    try:
+        lines = (Path(run_dir) / "engine.log").read_text(errors="replace").splitlines()[-200:]
+    except OSError:
+        return None
+    steps = [s for s in map(eng.progress_step, lines) if s is not None]
+    return steps[-1] if steps else None
+
+
+def wait_until(proc: subprocess.Popen, done, timeout: float, what: str) -> None:
+    """Poll ``done()`` every 0.1 s until it is true; fail if ``proc`` ends first or after ``timeout`` s."""
+    t0 = time.time()
+    while not done():
+        assert proc.poll() is None, f"the run ended before {what}"
+        assert time.time() - t0 < timeout, f"no {what} within {timeout:.0f} s"
+        time.sleep(0.1)

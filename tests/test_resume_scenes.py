@@ -3,7 +3,7 @@ by SIGKILL or SIGINT, or its engine by SIGSEGV) and run again resumes, and ends 
 once, the wall series sampled at the same steps and equal, and every frame's positions equal to an
 uninterrupted run's (docs/engines.md, Resume).
 
-The shear cell and plane shear decks run in segments that end at their restart points and start
+Every scene's decks run in segments that end at their restart points and start
 again from the restart file (LIGGGHTS: ``clear`` + ``read_restart``; YADE: ``O.save`` + ``O.load``),
 in an uninterrupted run as in a resumed one, so a resume is exact: what a restart file leaves out
 (LIGGGHTS' servo velocity, YADE's collider arrays and interaction order, Python state) is lost at
@@ -94,16 +94,9 @@ def _engine_step(run_dir: Path, engine: str) -> int | None:
     return steps[-1] if steps else None
 
 
-#: (engine, scene) whose resume is not yet exact, with what was measured
-NOT_YET = {
-    ("liggghts", "triaxial"): "1.42 r_min at the last frame after a SIGKILL and a resume from step 19200 (stage 1); "
-                              "every frame once, frames up to the resume step exact, wall rows at the same steps but "
-                              "the platen force up to 0.87 N off: the triaxial deck (its own stage loop, re-entered "
-                              "from restart/state.txt) is not run in segments yet",
-    ("yade", "triaxial"): "not measured (172,800 steps at ~65 steps/s on the loaded machine: ~45 min a run); its "
-                          "checkpoint is a PyRunner without the reload of checkpoint_and_reload, so the collider and "
-                          "interaction-order difference measured on the shear cell before (4.7 r_min) is expected",
-}
+#: (engine, scene) whose resume is not yet exact, with what was measured (none since the triaxial
+#: decks run in segments too)
+NOT_YET: dict = {}
 
 
 @pytest.mark.parametrize("how", ["sigkill", "sigint", "engine_sigsegv"])

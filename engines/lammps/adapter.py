@@ -31,7 +31,7 @@ from ..base import Engine, EngineError, UnsupportedFeature, tail
 from ..lammps_dump import per_atom_arrays, read_binary_dump, truncate_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
 from ..liggghts.adapter import DumpOutput, cut_wall_series, dump_columns, write_data_file
-from ..liggghts.segments import dump_segments
+from ..liggghts.segments import deck_segments, dump_segments
 from ..render import render_template
 from .numbers import lammps_numbers, shear_cell_law, shear_cell_regions
 
@@ -156,6 +156,7 @@ class Lammps(Engine):
             "dump_columns": cols,
             "dump_file": f"frames.{resume['step']:012d}.bin" if resume else "frames.bin",
         }
+        ctx["segments"] = deck_segments(sc["steps"], ctx["restart_every"], resume["step"] if resume else 0)
         write_json(run_dir / "dump" / "columns.json", cols)
         deck = run_dir / ("resume.in" if resume else "deck.in")
         render_template(f"lammps/{case.scene.kind}.in.j2", ctx, deck)

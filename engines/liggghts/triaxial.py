@@ -90,13 +90,19 @@ def check_inserted_clumps(run_dir, params) -> None:
     write_text(run_dir / "dump" / "clumps_end.txt", "".join(end))
 
 
-#: columns of LIGGGHTS' restart/state.txt, one line per restart file (templates/liggghts/triaxial.in.j2)
-RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ztot", "vlast", "H0", "shear_start")
+#: columns of LIGGGHTS' restart/state.txt, one line per restart file (templates/liggghts/triaxial.in.j2):
+#: step, stage (1, 2), stage-1 chunks tested, grains' drag on (1/0), step the drag's ramp began (-1:
+#: none), sum of the top platen's speed samples [m/s] over steps 0..step and the one of the step,
+#: sample height H0 [m] and step when loading began (0 before)
+RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ramp_start", "ztot", "vlast", "H0", "shear_start")
+#: the columns a resumed deck sets from their text as LIGGGHTS printed it (15 digits): the deck it
+#: resumes gave them the same text (``variable ZS equal ${ztend}``), so both runs hold the same double
+TEXT_COLUMNS = ("ztot", "vlast", "H0")
 
 
 def read_restart_states(run_dir: Path) -> dict[int, dict]:
     """{step: stage state} from LIGGGHTS' ``restart/state.txt`` (the last line of each step wins:
-    a resumed run may write a step again)."""
+    a resumed run may write a step again); ``text`` holds the printed text of :data:`TEXT_COLUMNS`."""
     f = Path(run_dir) / "restart" / "state.txt"
     out = {}
     if not f.exists():
@@ -104,13 +110,14 @@ def read_restart_states(run_dir: Path) -> dict[int, dict]:
     for line in f.read_text().splitlines():
         parts = line.split()
         if len(parts) != len(RESTART_STATE_COLUMNS):
-            continue                                    # a line cut by a kill
+            continue                                    # a line cut by a kill, or a comment
         try:
             row = dict(zip(RESTART_STATE_COLUMNS, (float(x) for x in parts)))
         except ValueError:
             continue
-        for k in ("step", "stage", "chunks", "dragon", "shear_start"):
+        for k in ("step", "stage", "chunks", "dragon", "ramp_start", "shear_start"):
             row[k] = int(row[k])
+        row["text"] = {k: parts[RESTART_STATE_COLUMNS.index(k)] for k in TEXT_COLUMNS}
         out[row["step"]] = row
     return out
 

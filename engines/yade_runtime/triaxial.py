@@ -208,7 +208,7 @@ class Controller:
             self.drop_grain_drag()
             self.v = -c["strain_rate"] * H
             self.shear_end = O.iter + 1 + c["shear_steps"]
-            O.stopAtIter = self.shear_end
+            O.stopAtIter = min(O.stopAtIter, self.shear_end)   # a checkpoint's stop may come first
             print("SHEAR start at iter %d, H0 = %.9g m, v = %.6g m/s" % (O.iter + 1, H, self.v), flush=True)
 
     def stop_iter(self):
@@ -226,7 +226,8 @@ class Controller:
         """Flush frames, then save the simulation for resume with the Python state (controller,
         membrane with its recorded frames and permanent forces, body ids) as JSON in O.tags: one
         file, one atomic rename, so the state always belongs to the checkpoint it is in
-        (docs/triaxial.md, Resume). Run from a PyRunner placed FIRST in O.engines."""
+        (docs/triaxial.md, Resume). Called between O.run calls (an iteration boundary: positions,
+        O.iter and O.time describe one instant); the script then loads the file back."""
         self.rec.flush()
         t0 = time.time()
         state = {"iter": O.iter, "bot": self.bot, "top": self.top, "ids": self.ids, "pids": self.pids,
