@@ -196,11 +196,13 @@ def pack_box(radii: np.ndarray, L: float, z_lo: float, z_hi: float, rng, max_tri
 
 
 def relax_overlaps(pos: np.ndarray, r: np.ndarray, container, tol: float, scale: float,
-                   max_iter: int) -> tuple[np.ndarray, int, float]:
+                   max_iter: int, separation: float = 0.55, weights: str = "volume") -> tuple[np.ndarray, int, float]:
     """Dense packing by collective rearrangement: from the centres ``pos`` (n, 3) [m] of spheres
     of radii ``r`` [m], repeatedly push every overlapping pair apart along its centre line, each
-    sphere by the share of the overlap its partner's volume carries (w_i = r_j³/(r_i³ + r_j³)),
-    with a slight over-relaxation (0.55 of the overlap per side), and project the centres back into
+    sphere by the share its partner's volume carries (w_i = r_j³/(r_i³ + r_j³); ``weights="equal"``:
+    w_i = 1/2) of ``separation`` × the overlap (0.55, the triaxial packer; the synthetic CT packings
+    use 1.02 with equal weights, which leaves their touching grains a sliver apart, as their
+    segmentation and tracking tests were tuned on), and project the centres back into
     ``container`` (:class:`Cylinder`, :class:`Box`), until the largest overlap is below ``tol`` ×
     ``scale`` [m] (checked before each push) or ``max_iter`` sweeps have run. The dense packer of
     the triaxial scene and of the synthetic CT packings (the loose one is :func:`rsa_pack`).
@@ -225,8 +227,8 @@ def relax_overlaps(pos: np.ndarray, r: np.ndarray, container, tol: float, scale:
             break
         i, j, dv, dist, ov = i[m], j[m], dv[m], dist[m], ov[m]
         nvec = dv / np.maximum(dist, 1e-300)[:, None]
-        wi = vol[j] / (vol[i] + vol[j])
-        step = 0.55 * ov                          # slight over-relaxation
+        wi = vol[j] / (vol[i] + vol[j]) if weights == "volume" else np.full(len(i), 0.5)
+        step = separation * ov
         disp = np.zeros_like(pos)
         np.add.at(disp, i, -(step * wi)[:, None] * nvec)
         np.add.at(disp, j, (step * (1 - wi))[:, None] * nvec)

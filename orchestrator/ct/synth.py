@@ -24,6 +24,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from ..psd import Box, Cylinder, relax_overlaps
 from .io import Scan
 
 __all__ = ["pack_spheres", "render_phase", "acquire", "render_scan", "render_sequence",
@@ -33,7 +34,9 @@ __all__ = ["pack_spheres", "render_phase", "acquire", "render_scan", "render_seq
 # ------------------------------------------------------------------------------------- packings
 
 def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=3000, tol=1e-3, initial=None):
-    """Place spheres without overlap inside a box or a cylinder (overlap relaxation).
+    """Place spheres without overlap inside a box or a cylinder (the project's dense packer,
+    :func:`orchestrator.psd.relax_overlaps`, from a jittered lattice in a box or random centres in
+    a cylinder).
 
     radii : (N,) radii [m].
     box : ((x0, y0, z0), (x1, y1, z1)) [m]; or
@@ -41,15 +44,21 @@ def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=3000, tol=1e
     initial : (N, 3) starting positions [m] (e.g. displaced grains whose overlaps must be removed);
     default random.
     Returns centres (N, 3) [m]. The largest remaining overlap is below ``tol`` times the mean radius
-    (a :class:`RuntimeError` otherwise: the packing is too dense for this simple relaxation).
+    (a :class:`RuntimeError` otherwise: the packing is too dense for this relaxation).
     """
     rng = np.random.default_rng(seed)
     r = np.asarray(radii, dtype=float)
     n = len(r)
     if box is not None:
         lo, hi = np.asarray(box[0], float), np.asarray(box[1], float)
+        container = Box(lo, hi)
+    elif cylinder is not None:
+        cx, cy, R, z0, z1 = cylinder
+        container = Cylinder(R, z0, z1, center=(cx, cy))
+    else:
+        raise ValueError("give box or cylinder")
     if initial is not None:
-        pass
+        x = np.array(initial, dtype=float)
     elif box is not None:
         # start from a jittered lattice with at least n sites: far fewer overlaps than random
         # positions, so the relaxation converges in a few dozen sweeps
@@ -61,48 +70,17 @@ def pack_spheres(radii, box=None, cylinder=None, seed=0, iterations=3000, tol=1e
         g = np.stack(np.meshgrid(*[(np.arange(k) + 0.5) / k for k in m], indexing="ij"), -1).reshape(-1, 3)
         g = g[rng.permutation(len(g))[:n]]
         x = lo + r.mean() + g * span + (rng.random((n, 3)) - 0.5) * 0.2 * span / m
-    elif cylinder is not None:
-        cx, cy, R, z0, z1 = cylinder
+    else:
         rho = (R - r) * np.sqrt(rng.random(n))
         phi = rng.random(n) * 2 * np.pi
         x = np.column_stack([cx + rho * np.cos(phi), cy + rho * np.sin(phi),
                              z0 + r + rng.random(n) * (z1 - z0 - 2 * r)])
-    else:
-        raise ValueError("give box or cylinder")
-    if initial is not None:
-        x = np.array(initial, dtype=float)
-    rmax = r.max()
-    worst = np.inf
-    for it in range(iterations):
-        tree = cKDTree(x)
-        pairs = tree.query_pairs(2 * rmax, output_type="ndarray")
-        if len(pairs):
-            i, j = pairs[:, 0], pairs[:, 1]
-            d = x[j] - x[i]
-            dist = np.linalg.norm(d, axis=1)
-            ov = r[i] + r[j] - dist
-            m = ov > 0
-            i, j, d, dist, ov = i[m], j[m], d[m], np.maximum(dist[m], 1e-12 * rmax), ov[m]
-            worst = ov.max() if len(ov) else 0.0
-            push = (d / dist[:, None]) * (0.5 * 1.02 * ov)[:, None]
-            for k in range(3):
-                x[:, k] += np.bincount(j, push[:, k], n) - np.bincount(i, push[:, k], n)
-        else:
-            worst = 0.0
-        # walls
-        if box is not None:
-            x = np.clip(x, lo + r[:, None], hi - r[:, None])
-        else:
-            cx, cy, R, z0, z1 = cylinder
-            v = x[:, :2] - (cx, cy)
-            rho = np.linalg.norm(v, axis=1)
-            out = rho > R - r
-            x[out, :2] = (cx, cy) + v[out] * ((R - r[out]) / rho[out])[:, None]
-            x[:, 2] = np.clip(x[:, 2], z0 + r, z1 - r)
-        if worst < tol * r.mean():
-            return x
-    raise RuntimeError(f"pack_spheres: largest overlap still {worst / r.mean():.3g} mean radii after "
-                       f"{iterations} iterations; use fewer or smaller grains")
+    container.project(x, r)
+    x, _, worst = relax_overlaps(x, r, container, tol, r.mean(), iterations, separation=1.02, weights="equal")
+    if worst >= tol:
+        raise RuntimeError(f"pack_spheres: largest overlap still {worst:.3g} mean radii after "
+                           f"{iterations} iterations; use fewer or smaller grains")
+    return x
 
 
 def separate_contacts(centres, radii, min_gap, overlap=0.005, iterations=2000, box=None):
