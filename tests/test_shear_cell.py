@@ -20,7 +20,9 @@ from shear_cell_protocol import check_smoke_protocol
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 SMOKE = CASES / "shear_cell_smoke.yaml"
-SCHEDULE_MINUTES = 2          #: the smoke protocol on both engines (tests/conftest.py schedule_groups)
+#: one xdist group with tests/compare (tests/conftest.py schedule_groups): the smoke runs are shared
+SCHEDULE_GROUP = "tests/compare"
+SCHEDULE_MINUTES = 4
 ENGINES = [e for e in ("liggghts", "yade") if shutil.which(e)]
 
 
@@ -219,13 +221,14 @@ def test_single_contact_substitutes_vs_seed():
 # the smoke case on the real engines
 # ------------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def smoke_runs(tmp_path_factory):
+def smoke_runs(runs_root):
+    """The smoke case on LIGGGHTS and YADE in the session's runs directory: the compare tests'
+    crossval (tests/compare/conftest.py) reuses these runs (same xdist group)."""
     from orchestrator.runner import run_case
     if not ENGINES:
         pytest.fail("neither liggghts nor yade is installed; run `bash .ci/setup`")
-    root = tmp_path_factory.mktemp("shear_runs")
     case = load_case(SMOKE)
-    return case, {e: run_case(case, e, runs_root=root, progress=False) for e in ENGINES}
+    return case, {e: run_case(case, e, runs_root=runs_root, progress=False) for e in ENGINES}
 
 
 @pytest.mark.engine

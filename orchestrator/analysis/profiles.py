@@ -136,6 +136,6 @@ def analyze_profiles(frames, center=None, z_ref: float = 0.0, r_max: float | Non
                                       "map": pd.concat(mp, ignore_index=True)},
                   scalars={"center_x": center[0], "center_y": center[1], "z_ref": z_ref, "r_max": r_max, "control": cname},
                   options={"center": center, "z_ref": z_ref, "r_max": r_max, "z_range": list(z_range),
-                           "radial_z_range": list(radial_z_range) if radial_z_range else "each frame's filled height",
+                           "radial_z_range": list(radial_z_range) if radial_z_range else None,   # None: each frame's filled height
                            "bins_r": bins_r, "bins_z": bins_z},
                   plotter=plot_profiles)

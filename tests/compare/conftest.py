@@ -17,10 +17,9 @@ def crossval_smoke(runs_root, engines_installed, tmp_path_factory):
     from orchestrator.case import load_case
     from orchestrator.compare import crossval
     out = tmp_path_factory.mktemp("crossval")
-    # the in-deck overlap monitor stops YADE's smoke run (largest overlap 0.151 r_min at step 28225
-    # > 0.15, and 0.302 at step 53569 with the limit at 0.3); the smoke case is not physics, so the
-    # monitors are off here (as before they existed) and the stop is reported to the lead
-    case = load_case(SMOKE, overrides={"stability": {"monitors": False}})
+    # the smoke case as tests/test_shear_cell.py runs it (monitors on: both engines complete), in the
+    # same session runs directory and xdist group, so each engine's run is made once for both files
+    case = load_case(SMOKE)
     # the two Debian engines (the smoke case names none, so it would run LAMMPS too: its shear cell
     # is tested in tests/test_lammps_shear_cell.py, and a third run would add minutes to CI)
     return crossval(case, runs_root=runs_root, out_dir=out, engines=["liggghts", "yade"])
