@@ -101,3 +101,12 @@ def test_cpu_time_per_rank_stands_for_the_wall_time_of_a_loaded_run(tmp_path):
     (d / "case.yaml").write_text("scene: {kind: shear_cell}\n")
     (s,) = samples_from_runs([tmp_path])
     assert s.engine_s == pytest.approx(100.0) and s.loop_s == pytest.approx(90.0)
+
+
+def test_packings_of_nearly_one_size_count_as_one_size():
+    """226 and 228 grains (two seeds of one case) cannot separate the per-step from the
+    per-particle cost: the fit is one-size, not an extrapolation from a 1 % lever arm (it predicted
+    the 1025-grain default case at 0.15 of its engine time)."""
+    tp = fit(_runs(2e-4, 1e-6, 0.5, [226, 228]))
+    assert tp.per_step_s == 0 and "one size" in tp.note
+    assert tp.engine_time(227, 10_000) == pytest.approx(0.5 + 10_000 * (2e-4 + 227e-6), rel=0.01)
