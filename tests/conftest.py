@@ -38,29 +38,19 @@ def pytest_collection_modifyitems(config, items):
 
 
 def schedule_groups(items) -> None:
-    """Scheduling for the two xdist workers (``--dist loadgroup --no-loadscope-reorder``,
-    pyproject.toml): each test file is one group, so a file's module fixtures (shared engine runs)
-    stay in one process, as with ``loadfile``; a file that sets ``SPLIT_BY_ENGINE = True`` is one
-    group per value of its ``eng`` parameter instead (the YADE triaxial smoke run alone takes ~6 min:
-    it must not queue behind the LIGGGHTS one on the same worker). xdist hands groups out in
-    collection order, so the groups are sorted longest first (a long group started last is the
-    whole suite's tail) by the module's ``SCHEDULE_MINUTES``: its expected minutes on a quiet
-    2-core machine, a number or a dict by engine (0 when absent). Files that share a session fixture
-    (one engine run reused by several files) name one ``SCHEDULE_GROUP`` so that it runs once."""
-    def group(it):
-        name = getattr(it.module, "SCHEDULE_GROUP", None) or it.nodeid.split("::")[0]
-        eng = getattr(getattr(it, "callspec", None), "params", {}).get("eng")
-        if getattr(it.module, "SPLIT_BY_ENGINE", False) and eng is not None:
-            name += f"::{eng}"
-        return name, eng
-
-    def minutes(it, eng):
+    """Scheduling for the two xdist workers (``--dist loadfile --no-loadscope-reorder``,
+    pyproject.toml): xdist hands out test files in collection order, so the items are sorted
+    longest file first (a long file started last is the whole suite's tail) by the module's
+    ``SCHEDULE_MINUTES``: its expected minutes on a quiet 2-core machine, a number or a dict by
+    the ``eng`` parameter (0 when absent). (``--dist loadgroup`` with one group per engine was tried
+    on 24 Nov 2026: xdist's worker hook adds the group suffix before a conftest hook can mark the
+    items, so the groups were ignored and every test went to either worker.)"""
+    def minutes(it):
         m = getattr(it.module, "SCHEDULE_MINUTES", 0)
-        return m.get(eng, m.get(None, 0)) if isinstance(m, dict) else m
+        if isinstance(m, dict):
+            eng = getattr(getattr(it, "callspec", None), "params", {}).get("eng")
+            return max(m.values()) if eng is None else m.get(eng, 0)
+        return m
 
-    order = {}
-    for it in items:
-        name, eng = group(it)
-        it.add_marker(pytest.mark.xdist_group(name))
-        order[id(it)] = -minutes(it, eng)
-    items.sort(key=lambda it: order[id(it)])                   # stable: order within a group is kept
+    order = {id(it): -minutes(it) for it in items}
+    items.sort(key=lambda it: order[id(it)])                   # stable: order within a file is kept

@@ -20,8 +20,6 @@ from shear_cell_protocol import check_smoke_protocol
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 SMOKE = CASES / "shear_cell_smoke.yaml"
-#: one xdist group with tests/compare (tests/conftest.py schedule_groups): the smoke runs are shared
-SCHEDULE_GROUP = "tests/compare"
 SCHEDULE_MINUTES = 4
 ENGINES = [e for e in ("liggghts", "yade") if shutil.which(e)]
 
@@ -223,7 +221,7 @@ def test_single_contact_substitutes_vs_seed():
 @pytest.fixture(scope="module")
 def smoke_runs(runs_root):
     """The smoke case on LIGGGHTS and YADE in the session's runs directory: the compare tests'
-    crossval (tests/compare/conftest.py) reuses these runs (same xdist group)."""
+    crossval (tests/compare/conftest.py) reuses these runs when xdist puts both files on one worker."""
     from orchestrator.runner import run_case
     if not ENGINES:
         pytest.fail("neither liggghts nor yade is installed; run `bash .ci/setup`")

@@ -25,8 +25,7 @@ from orchestrator.case import load_case
 REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 ENGINES = ["liggghts", "yade"]
-#: one xdist group per engine (tests/conftest.py schedule_groups): the YADE smoke run takes ~6 min
-SPLIT_BY_ENGINE = True
+#: expected minutes (tests/conftest.py schedule_groups: this file starts first)
 SCHEDULE_MINUTES = {"yade": 7, "liggghts": 3}
 
 

@@ -18,7 +18,7 @@ def crossval_smoke(runs_root, engines_installed, tmp_path_factory):
     from orchestrator.compare import crossval
     out = tmp_path_factory.mktemp("crossval")
     # the smoke case as tests/test_shear_cell.py runs it (monitors on: both engines complete), in the
-    # same session runs directory and xdist group, so each engine's run is made once for both files
+    # same session runs directory, so on one xdist worker each engine's run is made once for both
     case = load_case(SMOKE)
     # the two Debian engines (the smoke case names none, so it would run LAMMPS too: its shear cell
     # is tested in tests/test_lammps_shear_cell.py, and a third run would add minutes to CI)

@@ -11,8 +11,6 @@ from orchestrator.compare import MEASURES, compare
 from orchestrator.compare.distances import ks, l2, rel_error
 
 pytestmark = pytest.mark.engine
-#: one xdist group with test_notebooks.py and test_report_browser.py: they share the crossval_smoke run
-SCHEDULE_GROUP = "tests/compare"
 SCHEDULE_MINUTES = 4
 
 

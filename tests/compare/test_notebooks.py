@@ -11,8 +11,6 @@ REPO = Path(__file__).resolve().parents[2]
 NOTEBOOKS = REPO / "notebooks"
 
 pytestmark = pytest.mark.engine
-#: one xdist group with test_compare.py and test_report_browser.py: they share the crossval_smoke run
-SCHEDULE_GROUP = "tests/compare"
 SCHEDULE_MINUTES = 4
 
 

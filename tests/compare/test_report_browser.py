@@ -10,8 +10,6 @@ import pytest
 from orchestrator.compare.browser import check_page, find_chromium
 
 pytestmark = pytest.mark.engine
-#: one xdist group with test_compare.py and test_notebooks.py: they share the crossval_smoke run
-SCHEDULE_GROUP = "tests/compare"
 SCHEDULE_MINUTES = 4
 
 
