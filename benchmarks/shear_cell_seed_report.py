@@ -17,6 +17,9 @@ piston's travel, from the run's wall series):
   the standard deviation of n over the outer 2 x50 against that over the interior (> 1: layers);
 - the number density inside the band (|z − z_sb| ≤ w_sb/2) against the rest of the packing.
 
+It first prints the run's compression check (the servo force against the target at the end of
+compression, shear_cell_checks.json): outside 2 %, the run is not a valid comparison.
+
 Every figure is computed from the run directory (frames.h5, params.json, analysis/*.csv).
 """
 from __future__ import annotations
@@ -27,23 +30,21 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from orchestrator.analysis import density_profile
+from orchestrator.case import load_case
 from orchestrator.frames import Frames
-from orchestrator.units import to_si
 
 SEED_BAND_WIDTH_X50 = 8.0          # seed 000, §4: steady band width ≈ 8 x50
 SEED_DILATION_ZONE = 0.2e-3        # seed 000, Fig. 2: dilation within 0.2 mm above the lower vanes [m]
 
 
-def vane_top(frames: Frames, params: dict, time: float) -> float:
-    """Height [m] of the lower vanes' top edge at ``time`` [s]: plate face + vane height + the
-    lower piston's travel (its wall series, linearly interpolated)."""
-    g = params["scene"]["geometry"]
+def vane_top(frames: Frames, geometry: dict, vane_height: float, time: float) -> float:
+    """Height [m] of the lower vanes' top edge at ``time`` [s]: plate face + ``vane_height`` [m] +
+    the lower piston's travel (its wall series, linearly interpolated)."""
     w = frames.wall("lower_piston")
     travel = float(np.interp(time, w["time"].to_numpy(), w["position_z"].to_numpy()))
-    return g["z_lower_face"] + params["case_scene"]["vane_height"] + travel
+    return geometry["z_lower_face"] + vane_height + travel
 
 
 def report(run_dir: Path) -> dict:
@@ -51,8 +52,7 @@ def report(run_dir: Path) -> dict:
     fr = Frames(run_dir)
     params = json.loads((run_dir / "params.json").read_text())
     case = json.loads((run_dir / "summary.json").read_text())
-    scene = yaml.safe_load((run_dir / "case.yaml").read_text())["scene"]       # the resolved case, SI with units
-    params["case_scene"] = {"vane_height": to_si(scene["vane_height"], "length")}
+    vane_height = load_case(run_dir / "case.yaml").scene.vane_height      # the run's resolved case [m]
     x50 = params["scene"]["psd"]["median"]
     g = params["scene"]["geometry"]
     steady = pd.read_csv(run_dir / "analysis" / "shearband_steady.csv")
@@ -60,8 +60,8 @@ def report(run_dir: Path) -> dict:
     times = fr.time
     first = int(np.argmax(stage >= 3)) if (stage >= 3).any() else 0
     last = fr.n_frames - 1
-    z0_first, z0_last = vane_top(fr, params, times[first]), vane_top(fr, params, times[last])
-    z_upper_tips = g["z_upper_face"] - params["case_scene"]["vane_height"]
+    z0_first, z0_last = vane_top(fr, g, vane_height, times[first]), vane_top(fr, g, vane_height, times[last])
+    z_upper_tips = g["z_upper_face"] - vane_height
     out = {"run": run_dir.name, "engine": case["engine"], "case": case["case"], "n": fr.n_particles, "x50": x50,
            "engine_s": case["wall_time"]["engine"], "engine_cpu_s": case["wall_time"].get("engine_cpu")}
     if len(steady):
@@ -69,6 +69,16 @@ def report(run_dir: Path) -> dict:
         w_sb = steady["w_sb"].to_numpy()
         out.update(z_sb=float(z_sb.mean()), z_sb_std=float(z_sb.std()), w_sb=float(w_sb.mean()),
                    w_sb_std=float(w_sb.std()), band_radii=len(steady))
+        last_pair = pd.read_csv(run_dir / "analysis" / "shearband_band.csv").iloc[-1]
+        out["w_sb_last"] = float(last_pair["w_sb"])          # the last frame pair's band (radii pooled)
+        out["angle_last"] = float(np.degrees(last_pair["control"]))
+    chk = json.loads((run_dir / "shear_cell_checks.json").read_text())["compression"]
+    out["compression_error"] = float(chk["relative_error"])   # servo force vs target at the end of compression
+    # the normal load during shear: the lower piston's force over the shear stage, against the target
+    w = fr.wall("lower_piston")
+    in_shear = w["time"].to_numpy() >= times[first]
+    load = -w["force_z"].to_numpy()[in_shear] / chk["target_force"]
+    out["shear_load"] = (float(load.mean()), float(load.min()), float(load.max())) if in_shear.any() else None
     R = g["R_cyl"]
     center = (0.0, 0.0)
     gap = z_upper_tips - z0_last                      # powder between the vane tips at the end [m]
@@ -113,13 +123,22 @@ def main(argv=None) -> int:
         print(f"\n{r['case']} on {r['engine']} ({r['run']}), {r['n']} grains, x50 = {x50 * um:.0f} µm, engine "
               f"{r['engine_s']:.0f} s" + (f" (CPU {r['engine_cpu_s']:.0f} s)" if r.get("engine_cpu_s") else ""))
         print("| seed 000 | this run |\n|---|---|")
+        ok = abs(r["compression_error"]) <= 0.02
+        print(f"| (normal load 0.5 kPa) | servo force at the end of compression {100 * r['compression_error']:+.1f} % "
+              f"from the target: {'within' if ok else 'OUTSIDE'} the 2 % check"
+              + ("" if ok else ": the sample was sheared before it carried the seed's load, not a valid comparison")
+              + " |")
+        if r["shear_load"]:
+            print("| (normal load during shear) | lower piston force / target: mean %.3f, range %.3f-%.3f |"
+                  % r["shear_load"])
         print(f"| (geometry) | {r['tips_gap'] * um:.0f} µm = {r['tips_gap'] / x50:.1f} x50 of powder between the vane tips "
               "at the end |")
         if "z_sb" in r:
             print(f"| band just above the lower vanes | z_sb = {r['z_sb'] * um:.0f} ± {r['z_sb_std'] * um:.0f} µm "
                   f"= {r['z_sb'] / x50:.1f} x50 above the lower vane tips ({r['band_radii']} radii) |")
             print(f"| w_sb ≈ {SEED_BAND_WIDTH_X50:.0f} x50 | w_sb = {r['w_sb'] * um:.0f} ± {r['w_sb_std'] * um:.0f} µm "
-                  f"= {r['w_sb'] / x50:.1f} ± {r['w_sb_std'] / x50:.1f} x50 |")
+                  f"= {r['w_sb'] / x50:.1f} ± {r['w_sb_std'] / x50:.1f} x50 over the steady window; "
+                  f"{r['w_sb_last'] * um:.0f} µm = {r['w_sb_last'] / x50:.1f} x50 at {r['angle_last']:.1f}° |")
         else:
             print("| band | no steady band fitted |")
         for zone, words in (("dilation", "dilation at 0-0.2 mm"), ("above", "compaction above 0.2 mm")):

@@ -161,7 +161,7 @@ def _sample(run_dir: Path) -> RunSample | None:
         # its CPU time is not (MPI ranks poll while they wait: CPU ~ ranks x wall when quiet)
         startup = max(engine_s - loop, 0.0)
         engine_s = min(float(cpu) / ranks, engine_s)
-        loop = max(engine_s - startup, 0.0) if startup < engine_s else engine_s
+        loop = engine_s - startup if startup < engine_s else engine_s
     return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir))
 
 

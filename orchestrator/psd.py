@@ -81,22 +81,16 @@ class Cylinder:
     def __init__(self, radius: float, z_lo: float, z_hi: float, wall_clearance: float = 0.0,
                  center: tuple[float, float] = (0.0, 0.0)):
         self.radius, self.z_lo, self.z_hi, self.clearance = radius, z_lo, z_hi, wall_clearance
-        self.center = center
+        self.center = np.asarray(center, dtype=float)
 
     def project(self, pos: np.ndarray, r: np.ndarray) -> None:
         """Move the centres ``pos`` (n, 3) [m] of spheres of radii ``r`` radially and vertically
         back inside, in place (the closest point inside, :func:`relax_overlaps`)."""
-        cx, cy = self.center
-        if cx == 0.0 and cy == 0.0:
-            rr = np.hypot(pos[:, 0], pos[:, 1])
-            lim = self.radius - r
-            out = rr > lim
-            pos[out, :2] *= (lim[out] / rr[out])[:, None]
-        else:
-            v = pos[:, :2] - (cx, cy)
-            rr = np.linalg.norm(v, axis=1)
-            out = rr > self.radius - r
-            pos[out, :2] = (cx, cy) + v[out] * ((self.radius - r[out]) / rr[out])[:, None]
+        v = pos[:, :2] - self.center
+        rr = np.hypot(v[:, 0], v[:, 1])
+        lim = self.radius - r
+        out = rr > lim
+        pos[out, :2] = self.center + v[out] * (lim[out] / rr[out])[:, None]
         pos[:, 2] = np.clip(pos[:, 2], self.z_lo + r, self.z_hi - r)
 
     def draw(self, r: float, rng) -> np.ndarray:

@@ -289,7 +289,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         summary["analysis"] = run_case_analyses(case, run_dir)
         summary["analysis_specs"] = case.analysis
         timings["analysis"] = time.perf_counter() - t3
-    timings["total"] = sum(v for k, v in timings.items() if k not in ("total", "engine_loop", "engine_cpu"))
+    timings["total"] = _total(timings)
     summary["wall_time"] = timings
     summary["integrity"] = run_record(run_dir, summary.get("analysis"))
     write_json(run_dir / "summary.json", summary)
@@ -333,14 +333,19 @@ def drop_resume_points(run_dir: Path) -> int:
     return freed
 
 
+def _total(timings: dict) -> float:
+    """The run's wall time [s]: its parts (render, engine, parse, analysis), not the engine's own
+    loop time or its CPU time, which are figures about the engine part."""
+    return sum(v for k, v in timings.items() if k not in ("total", "engine_loop", "engine_cpu"))
+
+
 def _mark_unstable(run_dir, summary, unstable: dict, engine_time: float) -> RunOutcome:
     """The monitors stopped the run (orchestrator.stability.monitors): status 'unstable', with the
     figure that tripped, its value and limit, and the step and time."""
     summary["status"] = "unstable"
     summary["unstable"] = unstable
     summary["wall_time"]["engine"] = engine_time
-    summary["wall_time"]["total"] = sum(v for k, v in summary["wall_time"].items()
-                                        if k not in ("total", "engine_loop", "engine_cpu"))
+    summary["wall_time"]["total"] = _total(summary["wall_time"])
     write_json(run_dir / "summary.json", summary)
     return RunOutcome(run_dir, "unstable", summary)
 

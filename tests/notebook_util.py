@@ -29,3 +29,14 @@ def execute_notebook(name, runs_root, out, timeout=600):
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.get("output_type") == "error"]
     assert not errors
     return nb
+
+
+def notebook_images(nb) -> int:
+    """How many PNG figures the executed notebook's cells output."""
+    return sum(1 for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
+               if "image/png" in o.get("data", {}))
+
+
+def notebook_text(nb) -> str:
+    """The text the executed notebook's cells printed."""
+    return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))

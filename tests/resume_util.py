@@ -1,4 +1,5 @@
-"""Shared steps of the kill-and-resume tests (tests/test_resume.py, tests/test_triaxial_resume.py)."""
+"""Shared steps of the kill-and-resume tests (tests/test_resume.py, tests/test_triaxial_resume.py,
+tests/test_resume_scenes.py)."""
 from __future__ import annotations
 
 import json
@@ -7,6 +8,9 @@ import signal
 import subprocess
 import time
 from pathlib import Path
+
+from orchestrator.registry import get_engine
+from orchestrator.runner import read_summary
 
 
 def kill_run(proc: subprocess.Popen, run_dir: Path) -> None:
@@ -17,7 +21,6 @@ def kill_run(proc: subprocess.Popen, run_dir: Path) -> None:
     proc.wait()
     time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
     assert json.loads((run_dir / "summary.json").read_text())["status"] == "running"    # as it was killed
-    from orchestrator.runner import read_summary
     assert read_summary(run_dir)["status"] == "interrupted"       # no live owner: read as interrupted
     assert not (run_dir / "frames.h5").exists()
 
@@ -34,7 +37,6 @@ def rerun_resumes(cmd: list[str], run_dir: Path, timeout: float) -> dict:
 
 def engine_step(run_dir: Path, engine: str) -> int | None:
     """The last step the engine reported in its log (LIGGGHTS thermo lines, YADE PROGRESS lines)."""
-    from engines import get_engine
     eng = get_engine(engine)
     try:
         lines = (Path(run_dir) / "engine.log").read_text(errors="replace").splitlines()[-200:]

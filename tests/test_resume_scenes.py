@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 from orchestrator.frames import Frames
+from resume_util import engine_step
 
 pytestmark = [pytest.mark.engine, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[1]
@@ -82,29 +83,10 @@ def _wait_resume_point(runs: Path, case: str, engine: str, proc, timeout=1200) -
     raise AssertionError("no resume point written")
 
 
-def _engine_step(run_dir: Path, engine: str) -> int | None:
-    """The last step the engine reported in its log (thermo or PROGRESS lines)."""
-    from engines import get_engine
-    eng = get_engine(engine)
-    try:
-        lines = (run_dir / "engine.log").read_text(errors="replace").splitlines()[-200:]
-    except OSError:
-        return None
-    steps = [s for s in map(eng.progress_step, lines) if s is not None]
-    return steps[-1] if steps else None
-
-
-#: (engine, scene) whose resume is not yet exact, with what was measured (none since the triaxial
-#: decks run in segments too)
-NOT_YET: dict = {}
-
-
 @pytest.mark.parametrize("how", ["sigkill", "sigint", "engine_sigsegv"])
 @pytest.mark.parametrize("engine", ["liggghts", "yade"])
 @pytest.mark.parametrize("scene", list(SCENES))
-def test_killed_scene_resumes_exactly(scene, engine, how, tmp_path, references, engines_installed, request):
-    if (engine, scene) in NOT_YET:                  # the check stays as it is; strict: a pass is reported
-        request.applymarker(pytest.mark.xfail(reason=NOT_YET[engine, scene], strict=True))
+def test_killed_scene_resumes_exactly(scene, engine, how, tmp_path, references, engines_installed):
     rng = random.Random(f"{scene}-{engine}-{how}")
     case = REPO / "cases" / f"{SCENES[scene]}.yaml"
     runs = tmp_path / "runs"
@@ -116,7 +98,7 @@ def test_killed_scene_resumes_exactly(scene, engine, how, tmp_path, references, 
     # a random step after the first resume point, read from the engine's log (machine speed aside)
     sc = json.loads((run_dir / "params.json").read_text())["scene"]
     target = rng.uniform(0.15, 0.9) * sc.get("total_steps", sc["steps"])
-    while proc.poll() is None and (_engine_step(run_dir, engine) or 0) < target:
+    while proc.poll() is None and (engine_step(run_dir, engine) or 0) < target:
         time.sleep(0.1)
     if proc.poll() is not None:
         pytest.skip(f"the run ended before the kill point (step {target:.0f})")

@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
-from notebook_util import execute_notebook
+from notebook_util import execute_notebook, notebook_images, notebook_text
 from orchestrator.case import load_case
 
 REPO = Path(__file__).resolve().parents[1]
@@ -254,13 +254,11 @@ def test_monitors_watch_the_smoke_runs(runs, eng):
 def test_triaxial_notebook_runs(runs, eng, tmp_path):
     """notebooks/triaxial_postprocessing.ipynb runs top to bottom on this file's LIGGGHTS smoke run
     (the notebook's run_case finds it complete in the same runs directory and reuses it)."""
-    assert outcome(runs, eng).status == "complete"
+    run = outcome(runs, eng)
+    assert run.status == "complete"
     nb = execute_notebook("triaxial_postprocessing.ipynb", runs["root"], tmp_path, timeout=1800)
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
-    assert "complete" in text
-    images = sum(1 for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
-                 if "image/png" in o.get("data", {}))
-    assert images >= 2
+    assert f"complete {run.run_dir}" in notebook_text(nb)         # the notebook's run is this one
+    assert notebook_images(nb) >= 2
 
 
 #: the smoke floors on a second packing (seed 2), YADE: before stage 1 ended without the drag

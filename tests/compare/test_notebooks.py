@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from notebook_util import execute_notebook
+from notebook_util import execute_notebook, notebook_images
 
 REPO = Path(__file__).resolve().parents[2]
 NOTEBOOKS = REPO / "notebooks"
@@ -17,9 +17,7 @@ SCHEDULE_MINUTES = 4
 @pytest.mark.parametrize("name", ["shear_cell_postprocessing.ipynb", "engine_crossval.ipynb", "sim_vs_ct.ipynb"])
 def test_notebook_runs(name, crossval_smoke, runs_root, tmp_path):
     nb = execute_notebook(name, runs_root, tmp_path)
-    images = sum(1 for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
-                 if "image/png" in o.get("data", {}))
-    assert images >= 2, f"{name}: expected plots in the outputs"
+    assert notebook_images(nb) >= 2, f"{name}: expected plots in the outputs"
 
 
 def test_notebooks_use_public_api_only():
