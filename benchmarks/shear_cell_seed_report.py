@@ -117,6 +117,12 @@ def main(argv=None) -> int:
         print(__doc__)
         return 2
     for run in runs:
+        if not (run / "frames.h5").is_file() or not (run / "analysis" / "shearband_steady.csv").is_file():
+            inside = sorted(p.parent for p in run.glob("*/frames.h5")) if run.is_dir() else []
+            print(f"error: {run}: not a complete shear-cell run with its shearband analysis"
+                  + (f"; it holds the runs {', '.join(map(str, inside))}: give one of them" if inside else
+                     "; give runs/<case>/<engine>-<hash>"), file=sys.stderr)
+            return 2
         r = report(run)
         x50 = r["x50"]
         um = 1e6

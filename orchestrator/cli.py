@@ -104,9 +104,18 @@ def _closing_results(run_dir, con) -> None:
 def cmd_clock(args) -> int:
     """``orchestrator clock show|refresh``: the fitted cost model per engine and scene."""
     from rich.table import Table
-    from .clock import load_table, package_table_path, refresh, user_table_path
+    from .clock import load_table, package_table_path, refresh, samples_from_runs, user_table_path
     con = _console()
     if args.action == "refresh":
+        missing = [r for r in args.runs if not Path(r).exists()]
+        if missing or not args.runs:
+            print(f"error: clock refresh: {'no such path ' + ', '.join(map(str, missing)) if missing else 'no runs given'}; "
+                  "give run directories or runs/ trees, e.g. `orchestrator clock refresh runs`", file=sys.stderr)
+            return 2
+        if not samples_from_runs(args.runs):
+            print(f"error: clock refresh: no complete run under {', '.join(map(str, args.runs))} (a run counts once "
+                  "its summary.json says complete and it was not resumed); nothing written", file=sys.stderr)
+            return 2
         out = package_table_path() if args.package else user_table_path()
         fitted = refresh(args.runs, out)
         n = sum(tp.runs for scenes in fitted.values() for tp in scenes.values())

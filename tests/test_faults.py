@@ -432,3 +432,10 @@ def test_an_estimate_without_measured_runs_says_it_is_a_lower_bound(tmp_path, mo
     assert main(["validate", str(case_file(tmp_path, "lmp", "engines: [lammps]\n"))]) in (0, None)
     line = next(l for l in capsys.readouterr().out.splitlines() if l.strip().startswith("lammps:"))
     assert "lower bound" in line, line
+
+
+def test_clock_refresh_of_a_missing_or_empty_path_is_refused(tmp_path):
+    """`clock refresh` of a path that does not exist, or holds no complete run, wrote the table
+    unchanged and said it had fitted 0 models."""
+    one_message(cli("clock", "refresh", tmp_path / "nope"), 2, "no such path", "orchestrator clock refresh runs")
+    one_message(cli("clock", "refresh", tmp_path), 2, "no complete run", "nothing written")
