@@ -22,7 +22,7 @@ def test_sweep_on_local_cluster(tmp_path, engines_installed):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             Client(cluster) as client:
         df = sweep(CASE, sets, engines=["liggghts"], runs_root=tmp_path, scheduler=client)
-        assert list(df["status"]) == ["complete", "complete", "failed"]
+        assert list(df["status"]) == ["complete", "complete", "failed"], df[["status", "error"]].to_string()
         assert df["run_id"].nunique() == 3 and all(r.startswith("liggghts-") for r in df["run_id"])
         assert df.loc[:1, "mu_macro"].notna().all()
         assert not df["reused"].any()
