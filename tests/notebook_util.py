@@ -11,11 +11,12 @@ REPO = Path(__file__).resolve().parents[1]
 NOTEBOOKS = REPO / "notebooks"
 
 
-def execute_notebook(name, runs_root, out, timeout=600):
+def execute_notebook(name, runs_root, out, timeout=600, env: dict | None = None):
     """Execute ``notebooks/<name>`` with ORCH_RUNS = ``runs_root`` (its runs are reused when they
-    exist) and ORCH_OUT = ``out``; asserts no cell raised and returns the executed notebook."""
+    exist), ORCH_OUT = ``out`` and the variables in ``env``; asserts no cell raised and returns the
+    executed notebook."""
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
-    env = {"ORCH_RUNS": str(runs_root), "ORCH_OUT": str(out), "ORCH_ROOT": str(REPO)}
+    env = {"ORCH_RUNS": str(runs_root), "ORCH_OUT": str(out), "ORCH_ROOT": str(REPO), **(env or {})}
     old = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
     try:
