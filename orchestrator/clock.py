@@ -6,9 +6,10 @@ Model (per engine and scene, fitted from completed runs)::
 
 - ``t_start`` [s]: process start-up and set-up (reading the packing and meshes, building the
   neighbour structures, the first dump), measured as engine time minus the engine's own loop time;
-- the engine time of a run is its CPU time per rank where the run recorded one
+- the engine time of a one-rank run is its CPU time where the run recorded one
   (``wall_time.engine_cpu``, from ``os.wait4``), its wall time otherwise: on a shared machine the
-  wall time grows with the load, the CPU time does not;
+  wall time grows with the load, a single process's CPU time does not (MPI ranks poll while they
+  wait, so several ranks' CPU time grows with the load too: their wall time is kept);
 - ``a`` [s/step]: cost per step independent of the particle count (mesh walls, servo and wall
   computes, Python callbacks in YADE decks, dumps amortised over the run);
 - ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration);
@@ -155,10 +156,12 @@ def _sample(run_dir: Path) -> RunSample | None:
     loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
         else engine_s
     cpu = wt.get("engine_cpu")
-    if isinstance(cpu, (int, float)) and cpu > 0:
-        # the engine's CPU time per rank stands for its wall time on a quiet machine: the wall time
-        # of a run that shared its cores (other runs, a test suite) is longer by the load factor,
-        # its CPU time is not (MPI ranks poll while they wait: CPU ~ ranks x wall when quiet)
+    if isinstance(cpu, (int, float)) and cpu > 0 and ranks == 1:
+        # a one-rank engine's CPU time stands for its wall time on a quiet machine: the wall time of a
+        # run that shared its cores (other runs, a test suite) is longer by the load factor, its CPU
+        # time is not. Not so on several MPI ranks: a rank polls while it waits for one the load has
+        # descheduled (the default case, 2 ranks: 201 s quiet; beside a YADE run 636 s wall and
+        # 806 s CPU, 403 s per rank), so their wall time is kept
         startup = max(engine_s - loop, 0.0)
         engine_s = min(float(cpu) / ranks, engine_s)
         loop = engine_s - startup if startup < engine_s else engine_s
