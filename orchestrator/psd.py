@@ -200,35 +200,59 @@ def relax_overlaps(pos: np.ndarray, r: np.ndarray, container, tol: float, scale:
     ``container`` (:class:`Cylinder`, :class:`Box`), until the largest overlap is below ``tol`` ×
     ``scale`` [m] (checked before each push) or ``max_iter`` sweeps have run. The dense packer of
     the triaxial scene and of the synthetic CT packings (the loose one is :func:`rsa_pack`).
+
+    The overlapping pairs come from a Verlet list (:func:`_verlet_pairs`: the pairs closer than
+    r_i + r_j + skin, rebuilt once a centre has moved more than skin/2), so each sweep finds
+    exactly the pairs a fresh neighbour search would, in index order whatever the list's age.
     Returns (positions, sweeps run, largest overlap / ``scale`` at the last check); converged when
     the last is below ``tol``."""
-    from scipy.spatial import cKDTree      # here: scipy.spatial costs ~0.3 s to import (validate, #16)
     pos = np.array(pos, dtype=float)
     r = np.asarray(r, dtype=float)
+    n = len(r)
     vol = r ** 3
-    rmax = r.max()
+    skin = _VERLET_SKIN * float(np.median(r))
     worst = np.inf
     it = 0
+    ref = None
     for it in range(max_iter):
-        pairs = cKDTree(pos).query_pairs(2 * rmax, output_type="ndarray")
-        i, j = pairs[:, 0], pairs[:, 1]
-        dv = pos[j] - pos[i]
-        dist = np.linalg.norm(dv, axis=1)
-        ov = r[i] + r[j] - dist
+        if ref is None or np.max(np.sum((pos - ref) ** 2, axis=1)) > (0.5 * skin) ** 2:
+            ci, cj = _verlet_pairs(pos, r, skin)
+            ref = pos.copy()
+        dv = pos[cj] - pos[ci]
+        dist = np.sqrt(np.einsum("ij,ij->i", dv, dv))
+        ov = r[ci] + r[cj] - dist
         m = ov > 0
         worst = ov[m].max() / scale if m.any() else 0.0
         if worst < tol:
             break
-        i, j, dv, dist, ov = i[m], j[m], dv[m], dist[m], ov[m]
+        i, j, dv, dist, ov = ci[m], cj[m], dv[m], dist[m], ov[m]
         nvec = dv / np.maximum(dist, 1e-300)[:, None]
         wi = vol[j] / (vol[i] + vol[j]) if weights == "volume" else np.full(len(i), 0.5)
         step = separation * ov
-        disp = np.zeros_like(pos)
-        np.add.at(disp, i, -(step * wi)[:, None] * nvec)
-        np.add.at(disp, j, (step * (1 - wi))[:, None] * nvec)
-        pos += disp
+        a, b = (step * wi)[:, None] * nvec, (step * (1 - wi))[:, None] * nvec
+        for c in range(3):
+            pos[:, c] += np.bincount(j, b[:, c], minlength=n) - np.bincount(i, a[:, c], minlength=n)
         container.project(pos, r)
     return pos, it, float(worst)
+
+
+#: Verlet skin of :func:`relax_overlaps`, in median radii (0.3: the list is rebuilt every few
+#: sweeps once the packing has settled; 16 000 seed-001 grains pack ~8x faster than with a fresh
+#: neighbour search every sweep, benchmarks in the commit message)
+_VERLET_SKIN = 0.3
+
+
+def _verlet_pairs(pos: np.ndarray, r: np.ndarray, skin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Index arrays (i, j), i < j, of the sphere pairs whose gap |x_i - x_j| - r_i - r_j is below
+    ``skin`` [m], sorted by (i, j)."""
+    from scipy.spatial import cKDTree      # here: scipy.spatial costs ~0.3 s to import (validate, #16)
+    pairs = cKDTree(pos).query_pairs(2 * r.max() + skin, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.linalg.norm(pos[j] - pos[i], axis=1)
+    keep = d < r[i] + r[j] + skin
+    i, j = i[keep], j[keep]
+    order = np.lexsort((j, i))
+    return i[order], j[order]
 
 
 def max_overlap(position: np.ndarray, radii: np.ndarray) -> float:

@@ -729,8 +729,10 @@ def _write_square_stl(path: Path, half: float, z: float, up: bool):
 # ---------------------------------------------------------------------------------------------
 def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.ndarray, dict]:
     """:func:`pack_cylinder`, cached by its inputs in ``$ORCHESTRATOR_CACHE/packings`` (default
-    ``~/.cache/orchestrator``), so that both engines' runs of a case pack once."""
-    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 1)).encode())
+    ``~/.cache/orchestrator``), so that both engines' runs of a case pack once. The key's last
+    field is the packer's version (2: :func:`~orchestrator.psd.relax_overlaps` on a Verlet list,
+    whose sums differ from version 1's in the last bits), so a cache never mixes the two."""
+    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 2)).encode())
     root = Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / "packings"
     f = root / f"{h.hexdigest()[:24]}.npz"
     if f.exists():
