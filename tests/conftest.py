@@ -34,7 +34,20 @@ def pytest_collection_modifyitems(config, items):
            and it.get_closest_marker("engine") is None]
     if bad:
         raise pytest.UsageError("tests that start an engine without @pytest.mark.engine: " + ", ".join(bad))
+    deselect_slow_unless_asked(config, items)
     schedule_groups(items)
+
+
+def deselect_slow_unless_asked(config, items) -> None:
+    """The ``slow`` tier (long validation runs) runs only when the ``-m`` expression names it
+    (``-m slow``, ``-m "slow or not slow"``): so ``pytest``, ``pytest -m engine`` and the fast tier
+    ``pytest -m "not engine"`` (README) leave it out, whatever else ``-m`` selects."""
+    if "slow" in (config.option.markexpr or ""):
+        return
+    slow = [it for it in items if it.get_closest_marker("slow") is not None]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [it for it in items if it.get_closest_marker("slow") is None]
 
 
 def schedule_groups(items) -> None:
