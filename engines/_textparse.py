@@ -12,16 +12,11 @@ significant digits, ``nan``/``inf``, a token that is not a decimal number, an ``
 """
 from __future__ import annotations
 
-import os
-import tempfile
 
 import numpy as np
 
 # as orchestrator/analysis/_cells.py: a read-only package directory caches kernels per user
-if "NUMBA_CACHE_DIR" not in os.environ and not os.access(os.path.dirname(os.path.abspath(__file__)), os.W_OK):
-    os.environ["NUMBA_CACHE_DIR"] = os.path.join(tempfile.gettempdir(), f"orchestrator-numba-{os.getuid()}")
-
-import numba  # noqa: E402  (after NUMBA_CACHE_DIR: numba reads it at import)
+from orchestrator.jit import numba   # numba with a writable kernel cache (orchestrator/jit.py)
 
 _P10 = np.array([10.0 ** k for k in range(23)])          # 1e0 .. 1e22: every one an exact double
 

@@ -16,18 +16,13 @@ prints all of them side by side.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 
 import numpy as np
 
 # numba caches compiled kernels beside this file; where the package directory is read-only (a
 # system install, another user's checkout) and no cache directory is set, cache them in a per-user
 # temporary directory instead of failing ("no locator available")
-if "NUMBA_CACHE_DIR" not in os.environ and not os.access(os.path.dirname(os.path.abspath(__file__)), os.W_OK):
-    os.environ["NUMBA_CACHE_DIR"] = os.path.join(tempfile.gettempdir(), f"orchestrator-numba-{os.getuid()}")
-
-import numba  # noqa: E402  (after NUMBA_CACHE_DIR: numba reads it at import)
+from ..jit import numba   # numba with a writable kernel cache (orchestrator/jit.py)
 
 __all__ = ["CellList", "d2min_kernel", "count_within", "strains"]
 

@@ -30,6 +30,8 @@ import pandas as pd
 from scipy import ndimage
 from scipy.special import sph_harm_y
 
+from ._kernels import outermost_crossing
+
 __all__ = ["sh_basis", "sh_fit", "sh_evaluate", "invariants", "reconstruct", "fibonacci_directions",
            "grain_shapes", "radial_profile", "DEGREE"]
 
@@ -147,8 +149,18 @@ def fibonacci_directions(k: int):
 def radial_profile(field, centre_zyx, u, rmax, step=0.25, level=0.5):
     """Outermost radius [voxels] where ``field`` (a crop, [z, y, x]) crosses ``level`` along rays
     from ``centre_zyx`` (voxel coordinates in the crop) in directions u (K, 3) world (x, y, z).
-    Linear interpolation between samples; NaN where the ray never reaches ``level``."""
+    Linear interpolation between samples; NaN where the ray never reaches ``level``. A float32
+    field takes the compiled path (:func:`._kernels.outermost_crossing`, the same numbers)."""
     s = np.arange(0, rmax + step, step)
+    if field.dtype == np.float32 and field.ndim == 3:
+        return outermost_crossing(np.ascontiguousarray(field), np.ascontiguousarray(centre_zyx, dtype=float),
+                                  np.ascontiguousarray(u, dtype=float), s, float(step), float(level))
+    return _radial_profile_sampled(field, centre_zyx, u, s, step, level)
+
+
+def _radial_profile_sampled(field, centre_zyx, u, s, step, level):
+    """:func:`radial_profile` by sampling every ray at every radius of ``s`` (S,) [voxels] with
+    :func:`scipy.ndimage.map_coordinates`: any field dtype; the reference of the compiled path."""
     pts = centre_zyx[None, None, :] + s[None, :, None] * u[:, None, ::-1]          # (K, S, 3) zyx
     f = ndimage.map_coordinates(field, pts.reshape(-1, 3).T, order=1, mode="constant", cval=0.0)
     f = f.reshape(len(u), len(s))
@@ -215,10 +227,11 @@ def grain_shapes(seg, degree=DEGREE, n_rays=None, labels=None, progress=False):
         if ok.sum() < A.shape[1]:
             continue
         if ok.all():
-            x = pinv @ r
+            x, A_ok, r_ok = pinv @ r, A, r               # A[ok] would copy the 2 MB design per grain
         else:
-            x, *_ = np.linalg.lstsq(A[ok], r[ok], rcond=None)
-        resid[g] = np.sqrt(np.mean((A[ok] @ x - r[ok]) ** 2)) * vs
+            A_ok, r_ok = A[ok], r[ok]
+            x, *_ = np.linalg.lstsq(A_ok, r_ok, rcond=None)
+        resid[g] = np.sqrt(np.mean((A_ok @ x - r_ok) ** 2)) * vs
         coeffs[g] = _real_to_complex(x * vs, n, m, pos, degree)
     inv = invariants(coeffs)
     out = pd.DataFrame({"label": table["label"].to_numpy()})

@@ -1,9 +1,11 @@
 """A case's ct: section: `orchestrator ct run CASE` segments and tracks its scan series into
-runs/<case>/ct-<hash>/frames.h5, and a second call reuses it."""
+runs/<case>/ct-<hash>/frames.h5, and a second call reuses it.
+
+The commands run through the `orchestrator` console entry point (:func:`orchestrator.cli.main`, what
+`python -m orchestrator` calls) in this process: a subprocess per command would re-import numpy,
+scipy, pandas and the analysis (~3 s CPU each); `python -m orchestrator` itself is tests/test_cli.py's."""
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,27 +13,36 @@ import pytest
 from scipy.spatial import cKDTree
 
 from orchestrator.case import CaseError, load_case
+from orchestrator.cli import main as orchestrator_main
 from orchestrator.frames import Frames
 
 REPO = Path(__file__).resolve().parents[2]
 
 
+def _orchestrator(argv, capsys):
+    """Run ``orchestrator ARGV`` (the console entry point, in this process); returns (exit status,
+    stdout, stderr) of the command."""
+    capsys.readouterr()
+    status = orchestrator_main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
 @pytest.mark.heavy
-def test_ct_section_runs_and_matches_truth(tmp_path):
+def test_ct_section_runs_and_matches_truth(tmp_path, capsys):
     scans = tmp_path / "scans"
-    out = subprocess.run([sys.executable, "-m", "orchestrator", "ct", "synth", "--demo", "shear",
-                          "--voxel-size", "2 um", "--out", str(scans)], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr
+    status, _, log = _orchestrator(["ct", "synth", "--demo", "shear", "--voxel-size", "2 um", "--out", scans], capsys)
+    assert status == 0, log
     case = tmp_path / "with_ct.yaml"
     case.write_text(f"extends: {REPO / 'cases' / 'verification' / 'chung_ooi_2_sphere_plane_alumina.yaml'}\n"
                     "name: with_ct\n"
                     "ct:\n  scans: ['scans/scan_*.tif']\n  voxel_size: 2 um\n"
                     "  segment: {shape: false}\n  track: {method: displacement, max_disp: 10 um}\n")
     runs = tmp_path / "runs"
-    cmd = [sys.executable, "-m", "orchestrator", "ct", "run", str(case), "--runs", str(runs)]
-    first = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-    assert first.returncode == 0, first.stderr[-2000:]
-    path = Path(first.stdout.strip().split("ct frames: ")[-1])
+    cmd = ["ct", "run", case, "--runs", runs]
+    status, stdout, log = _orchestrator(cmd, capsys)
+    assert status == 0, log[-2000:]
+    path = Path(stdout.strip().split("ct frames: ")[-1])
     fr = Frames(path)
     truth = Frames(scans / "truth.h5")
     assert fr.n_frames == 2 and fr.meta["source"] == "ct"
@@ -44,8 +55,8 @@ def test_ct_section_runs_and_matches_truth(tmp_path):
     _, j = cKDTree(truth.position[0]).query(fr.position[0][ok])
     err = np.linalg.norm((fr.position[1][ok] - fr.position[0][ok]) - (truth.position[1][j] - truth.position[0][j]), axis=1)
     assert np.median(err) < 0.2 * 2e-6
-    second = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert second.returncode == 0 and str(path) in second.stdout          # reused
+    status, stdout, _ = _orchestrator(cmd, capsys)
+    assert status == 0 and str(path) in stdout                             # reused
 
 
 def test_ct_section_errors_name_the_field(tmp_path):

@@ -1,8 +1,11 @@
-"""The compiled volume passes of the segmentation (orchestrator/ct/_kernels.py) against scipy."""
+"""The compiled volume passes of the segmentation (orchestrator/ct/_kernels.py) against scipy, and the
+compiled rendering (orchestrator/ct/_render.py) and ray casting against their NumPy references."""
 import numpy as np
 import pytest
 from scipy import ndimage
+from scipy.spatial.transform import Rotation as Rot
 
+from orchestrator.ct import shape, synth
 from orchestrator.ct._kernels import edt
 from orchestrator.ct.segment import distance_map
 
@@ -114,3 +117,50 @@ def test_label_sizes_and_table_mask():
     base = np.random.default_rng(1).random(lab.shape) < 0.2
     assert np.array_equal(table_mask(lab, table, base), base | table[lab])
     assert np.array_equal(table_mask(lab, table, np.empty(0, bool)), table[lab])
+
+
+def _grain_boxes():
+    """A solid and a hollow sphere, an irregular SH grain unrotated and rotated, off the voxel grid,
+    one of them cut by the volume's face (voxel size 1e-5 m)."""
+    vs = 1e-5
+    rad = synth._GridRadial(synth.random_sh_grains(1, 6 * vs, seed=4)[0], 15)
+    R = Rot.random(random_state=3).as_matrix()
+    return vs, [synth.Grain(np.array([12.3, 11.7, 12.9]) * vs, 7.2 * vs),
+                synth.Grain(np.array([11.6, 12.4, 1.5]) * vs, 6.4 * vs, hollow=0.5),
+                synth.Grain(np.array([12.1, 12.8, 11.4]) * vs, rad.rmax, rad),
+                synth.Grain(np.array([12.1, 12.8, 11.4]) * vs, rad.rmax, rad, R, hollow=0.4)]
+
+
+@pytest.mark.parametrize("supersample", [3, 4])
+def test_compiled_coverage_equals_the_numpy_reference(supersample):
+    vs, grains = _grain_boxes()
+    offs = synth._offsets(supersample)
+    for g in grains:
+        vol = np.zeros((26, 26, 26), np.float32)
+        vol[::3] = 0.37                                   # earlier grains: combined by the maximum
+        c = np.asarray(g.centre)[::-1] / vs
+        lo = np.maximum(np.floor(c - g.rmax / vs - 2).astype(int), 0)
+        hi = np.minimum(np.ceil(c + g.rmax / vs + 2).astype(int) + 1, vol.shape)
+        zz, yy, xx = np.meshgrid(*[np.arange(a, b) for a, b in zip(lo, hi)], indexing="ij")
+        p = np.stack([zz, yy, xx], -1).reshape(-1, 3).astype(float) - c
+        want = vol.copy()
+        sub = want[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+        np.maximum(sub, synth._coverage(p, g, vs, offs).reshape(sub.shape).astype(np.float32), out=sub)
+        synth._coverage_compiled(vol[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], lo, c, g, vs, offs)
+        assert 0 < (vol > 0.37).sum() and ((vol > 0) & (vol < 1)).any()
+        assert np.array_equal(vol, want)
+
+
+def test_compiled_ray_profile_equals_map_coordinates():
+    rng = np.random.default_rng(6)
+    z, y, x = np.ogrid[:17, :15, :19]
+    field = np.clip(1.2 - np.sqrt((z - 8.2) ** 2 + (y - 7.1) ** 2 + (x - 9.3) ** 2) / 6, 0, 1)
+    field = (field + 0.2 * rng.random(field.shape)).astype(np.float32)
+    u, _, _ = shape.fibonacci_directions(600)
+    s = np.arange(0, 14.0 + 0.25, 0.25)
+    # inside: every ray crosses; from a corner of the crop: most rays leave it without crossing (NaN)
+    for c, finite in ((np.array([8.2, 7.1, 9.3]), (600, 600)), (np.array([0.0, 14.0, 3.5]), (10, 100))):
+        got = shape.radial_profile(field, c, u, 14.0)
+        want = shape._radial_profile_sampled(field, c, u, s, 0.25, 0.5)
+        assert finite[0] <= np.isfinite(got).sum() <= finite[1]
+        assert np.array_equal(got, want, equal_nan=True)
