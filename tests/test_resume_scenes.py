@@ -136,3 +136,48 @@ def test_killed_scene_resumes_exactly(scene, engine, how, tmp_path, references, 
     for name in ref.wall_names:
         a, b = ref.wall(name), got.wall(name)
         assert np.array_equal(np.asarray(a.to_numpy()), np.asarray(b.to_numpy()), equal_nan=True), name
+
+
+@pytest.mark.parametrize("phase", ["parse", "analysis"])
+@pytest.mark.parametrize("engine", ["liggghts", "yade"])
+def test_killed_during_parse_or_analysis_resumes_exactly(engine, phase, tmp_path, references, engines_installed):
+    """Killed (SIGKILL) after its engine has finished: while ``frames.h5`` is being written (its
+    ``.partial`` exists), or while the analyses run (``analysis/`` exists beside ``frames.h5``).
+    The same command then completes, with every frame, the wall series and every analysis table
+    equal to an uninterrupted run's (the shear cell smoke case: the scene with the most analyses)."""
+    scene = "shear_cell"
+    case = REPO / "cases" / f"{SCENES[scene]}.yaml"
+    runs = tmp_path / "runs"
+    cmd = orchestrator("run", case, "--engine", engine, "--runs", runs, "--quiet")
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    marker = "frames.h5.partial" if phase == "parse" else "analysis"
+    t0, found = time.time(), []
+    while not found:
+        assert proc.poll() is None, f"the run ended before its {phase} phase was caught"
+        assert time.time() - t0 < 1800, f"no {phase} phase within 30 min"
+        found = list(runs.glob(f"{SCENES[scene]}/{engine}-*/{marker}"))
+        time.sleep(0.005)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=60)
+    run_dir = found[0].parent
+    assert json.loads((run_dir / "summary.json").read_text())["status"] == "running"   # killed in the phase
+    if phase == "parse":
+        assert not (run_dir / "frames.h5").exists()
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "complete"
+    ref_dir = references(engine, scene)
+    ref, got = Frames(ref_dir), Frames(run_dir)
+    assert list(got.step) == list(ref.step)
+    err = float(np.nanmax(np.abs(got.position - ref.position))) / float(ref.radius.min())
+    print(f"{engine} {scene} killed during {phase}: {len(got.step)} frames; max |dx| = {err:.3g} r_min")
+    assert err <= EXACT
+    for name in ref.wall_names:
+        assert np.array_equal(np.asarray(ref.wall(name).to_numpy()), np.asarray(got.wall(name).to_numpy()),
+                              equal_nan=True), name
+    tables = sorted(p.relative_to(ref_dir) for p in (ref_dir / "analysis").rglob("*.csv"))
+    assert tables, "the reference run wrote no analysis table"
+    assert tables == sorted(p.relative_to(run_dir) for p in (run_dir / "analysis").rglob("*.csv"))
+    for t in tables:
+        assert (ref_dir / t).read_bytes() == (run_dir / t).read_bytes(), t
