@@ -28,7 +28,6 @@ def _orchestrator(argv, capsys):
     return status, out.out, out.err
 
 
-@pytest.mark.heavy
 def test_ct_section_runs_and_matches_truth(tmp_path, capsys):
     scans = tmp_path / "scans"
     status, _, log = _orchestrator(["ct", "synth", "--demo", "shear", "--voxel-size", "2 um", "--out", scans], capsys)

@@ -17,7 +17,6 @@ def test_assign_ids_lost_and_new():
     assert rows.tolist() == [[0, 1, 2, -1], [1, -1, 0, 2]]
 
 
-@pytest.mark.heavy
 def test_cli_pipeline(tmp_path):
     assert main(["ct", "synth", "--demo", "shear", "--voxel-size", "10 um", "--out", str(tmp_path / "s"),
                  "--hollow", "0.1"]) == 0

@@ -16,7 +16,6 @@ def _match(seg, centres, radii):
     return g, d, k, ok
 
 
-@pytest.mark.heavy
 def test_finds_grains_with_subvoxel_centroids(sphere_packing):
     c, r, seg = sphere_packing["centres"], sphere_packing["radii"], sphere_packing["seg"]
     g, d, k, ok = _match(seg, c, r)
@@ -38,7 +37,6 @@ def test_finds_grains_with_subvoxel_centroids(sphere_packing):
     assert (g["flag"] == "").mean() > 0.98
 
 
-@pytest.mark.heavy
 def test_contacts_and_pca_normals(sphere_packing):
     c, r, seg = sphere_packing["centres"], sphere_packing["radii"], sphere_packing["seg"]
     g, d, k, ok = _match(seg, c, r)
@@ -70,7 +68,6 @@ def test_contacts_and_pca_normals(sphere_packing):
     assert (np.einsum("ij,ij->i", br, ct[["nx", "ny", "nz"]].to_numpy()) > 0).all()
 
 
-@pytest.mark.heavy
 def test_flags_under_and_over_segmentation(sphere_packing):
     c, scan = sphere_packing["centres"], sphere_packing["scan"]
     # markers from the plain IsoData distance map with a high h merge many touching pairs
@@ -118,7 +115,6 @@ def test_empty_scan_gives_clear_error():
         segment.segment(s)
 
 
-@pytest.mark.heavy
 def test_basin_merging_equals_h_maxima_watershed(sphere_packing):
     """The markers: merging the basins of all regional maxima whose peak is at most h above the
     saddle to a higher basin gives the partition of the watershed seeded by the h-maxima

@@ -110,13 +110,11 @@ def _invariant_change_and_difference(irregular, pair=(0, 1), label="rotation + n
     return change, differ
 
 
-@pytest.mark.heavy
 def test_rotation_changes_invariants_less_than_any_two_grains_differ(irregular):
     change, differ = _invariant_change_and_difference(irregular)
     assert change.max() < differ.min()                # every rotated grain stays nearest itself
 
 
-@pytest.mark.heavy
 def test_rotation_alone_changes_invariants_far_less_than_grains_differ(rotated_clean):
     """Issue #6's floor for rotation: the same grain at three random orientations, rendered,
     segmented and measured, changes its invariant vector by less than 0.25x the smallest difference
@@ -133,7 +131,6 @@ def test_rotation_alone_changes_invariants_far_less_than_grains_differ(rotated_c
     assert change.max() < 0.5 * differ.min()
 
 
-@pytest.mark.heavy
 def test_rotation_adds_nothing_beyond_scan_noise(irregular):
     """With noise, the change between two scans of a grain is the noise's: turning the grain between
     the scans changes the invariants no more than re-scanning it unturned (within 25 %)."""
@@ -152,13 +149,11 @@ def test_rotation_adds_nothing_beyond_scan_noise(irregular):
     "unbiased surface estimate reaches 0.25x at this noise and grain size (at 4 % noise the same grains "
     "give 0.21x). Strict: this fails the suite "
     "the day it passes, so the marker cannot outlive a fix."))
-@pytest.mark.heavy
 def test_rotation_changes_invariants_far_less_than_grains_differ(irregular):
     change, differ = _invariant_change_and_difference(irregular)
     assert np.median(change) < 0.25 * differ.min()
 
 
-@pytest.mark.heavy
 def test_sh_matching_irregular_grains(irregular):
     (ga, ka), (gb, kb) = irregular["out"][:2]
     cols = _COLS

@@ -75,7 +75,6 @@ def _truth(seg, x, r):
     return np.where(d < 0.5 * r[k], k, -1)
 
 
-@pytest.mark.heavy
 def test_rotation_estimate_and_tracking_5deg(sheared_cylinder):
     s = sheared_cylinder
     ta, tb = _truth(s["segs"][0], s["a"], s["r"]), _truth(s["segs"][1], s["b"], s["r"])
