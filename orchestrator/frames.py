@@ -537,19 +537,26 @@ def load(path) -> Frames:
 
 
 def _group_table(g, keys=None):
-    """The datasets of an HDF5 group as a DataFrame; (M, 3) arrays become <name>_x/_y/_z columns."""
+    """The datasets of an HDF5 group as a DataFrame, one row per sample (the length of its ``time``
+    dataset when it has one); (M, 3) arrays become <name>_x/_y/_z columns. Datasets that are not
+    one value or one vector per row (a YADE membrane's node positions per frame, its triangles, a
+    node radius) go to ``DataFrame.attrs`` under their names, as arrays."""
     import pandas as pd
-    cols = {}
-    for key in (keys if keys is not None else list(g)):
-        if key not in g:
-            continue
-        a = g[key][()]
-        if a.ndim == 1:
+    keys = [k for k in (keys if keys is not None else list(g)) if k in g]
+    arrays = {k: g[k][()] for k in keys}
+    rows = len(arrays["time"]) if "time" in arrays else next((len(a) for a in arrays.values() if a.ndim), 0)
+    cols, other = {}, {}
+    for key, a in arrays.items():
+        if a.ndim == 1 and len(a) == rows:
             cols[key] = a
-        else:
+        elif a.ndim == 2 and len(a) == rows and a.shape[1] == 3:
             for c, ax in enumerate("xyz"):
                 cols[f"{key}_{ax}"] = a[:, c]
-    return pd.DataFrame(cols)
+        else:
+            other[key] = a
+    df = pd.DataFrame(cols)
+    df.attrs.update(other)
+    return df
 
 
 def _maybe_json(v):

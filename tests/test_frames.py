@@ -96,3 +96,23 @@ def test_vtk_export_readable(tmp_path):
     assert m.points.shape == (4, 3)                           # the absent particle is left out
     np.testing.assert_allclose(m.point_data["radius"], 1e-5)
     assert set(m.point_data["id"].tolist()) == {10, 11, 13, 14}
+
+
+def test_a_wall_group_with_a_membrane_mesh_reads_as_a_table(tmp_path):
+    """A YADE triaxial's ``membrane`` group holds per-frame node positions (S, nodes, 3), its
+    triangles and a node radius beside ``time``: ``wall`` gives the per-sample columns as a table and
+    the rest in ``attrs`` (it raised pandas' "Per-column arrays must each be 1-dimensional", and so
+    did ``walls`` on every YADE triaxial run)."""
+    nodes = np.arange(2 * 4 * 3, dtype=float).reshape(2, 4, 3)
+    tri = np.array([[0, 1, 2], [1, 2, 3], [0, 2, 3]])
+    write_frames(tmp_path / "m.h5", ids=np.arange(2), radius=np.full(2, 1e-5), time=[0.0, 0.1],
+                 position=np.zeros((2, 2, 3)),
+                 walls={"membrane": {"time": [0.0, 1.0], "step": [0, 10], "node_position": nodes,
+                                     "triangles": tri, "node_radius": [1e-4]},
+                        "platen": {"time": [0.0, 1.0], "force": [[0, 0, 1], [0, 0, 2]]}})
+    fr = Frames(tmp_path / "m.h5")
+    m = fr.wall("membrane")
+    assert list(m.columns) == ["step", "time"] and m.step.tolist() == [0, 10]
+    np.testing.assert_array_equal(m.attrs["node_position"], nodes)
+    np.testing.assert_array_equal(m.attrs["triangles"], tri)
+    assert set(fr.walls) == {"membrane", "platen"} and fr.walls["platen"].force_z.tolist() == [1.0, 2.0]
