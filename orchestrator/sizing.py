@@ -46,11 +46,18 @@ def frame_count(params: dict) -> int:
     return steps // max(int(sc.get("dump_every", steps) or steps), 1) + 1
 
 
+def integrated_particles(params: dict) -> int:
+    """Spheres the engine integrates: the scene's grains, or their member spheres when the grains
+    are clumps (``n_spheres``; frames.h5 holds the members too)."""
+    sc = params["scene"]
+    return int(sc.get("n_spheres") or sc.get("n") or len(sc.get("ids", [])))
+
+
 def estimate(case, params: dict, engine: str) -> dict:
     """Size of one run: ``particles``, ``steps``, ``frames``, ``memory_bytes`` (the larger of the
     engine and the parse), ``disk_bytes`` (frames.h5), ``engine_time_s``."""
     sc = params["scene"]
-    n = int(sc.get("n", len(sc.get("ids", []))))
+    n = integrated_particles(params)
     steps = int(sc.get("total_steps", sc["steps"]))
     frames = frame_count(params)
     o = case.output
@@ -142,7 +149,7 @@ def engine_time_estimate(case: Case, params: dict, engine_name: str) -> tuple[fl
     runs (the basis says so)."""
     eng = get_engine(engine_name)
     sc = params["scene"]
-    n = sc.get("n", len(sc.get("ids", [])))
+    n = integrated_particles(params)
     steps = sc.get("total_steps", sc["steps"])
     t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
     if t == t:         # not NaN: a measured model

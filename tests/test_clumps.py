@@ -101,6 +101,25 @@ def test_case_option_is_validated(tmp_path):
     assert size_range(case)[0] < case.scene.psd.bounds()[0] / 2
 
 
+def test_dry_run_sizes_the_member_spheres():
+    """A clump case is sized (particles, memory, frames.h5, engine time) on the member spheres the
+    engines integrate, which build_clumps places, not on the grain count."""
+    from orchestrator.derive import derive
+    from orchestrator.scenes.triaxial import build_clumps
+    from orchestrator.sizing import estimate
+    case = _clump_case()
+    params = derive(case)
+    sc = params["scene"]
+    d = np.asarray(sc["diameters"])
+    members, owner, _, _ = build_clumps(case, d, sc["diameter"] / 2, sc["height"])
+    assert len(np.unique(owner)) == sc["n"] and sc["n_spheres"] == len(members) > sc["n"]
+    size = estimate(case, params, "yade")
+    assert size["particles"] == len(members)
+    spheres = estimate(load_case(SMOKE), derive(load_case(SMOKE)), "yade")
+    assert spheres["particles"] == sc["n"]
+    assert size["engine_time_s"] > spheres["engine_time_s"] * len(members) / sc["n"] * 0.5
+
+
 SUBS = {"liggghts.membrane": "shell_pressure", "liggghts.placed_clumps": "inserted_clumps"}
 
 

@@ -13,7 +13,8 @@ engines:
 2. ``compress``: the background damping is removed and the lower piston is driven by a servo
    to the force σ·π R_p² (R_p the piston radius). Its speed limit v_max follows from a
    compression inertial number I_c = (v_max/h) x₅₀ √(ρ/σ); gain kp = 1 (full speed with no load).
-   The stage lasts the travel time at v_max plus ``settle_time_constants`` servo time constants;
+   The stage lasts ``travel_time_factor`` (1.5) travel times at v_max plus ``settle_time_constants``
+   servo time constants;
    its end criterion, the force averaged over the last ``average_window`` of the stage within 2 %
    of the target, is checked from the wall series (``compression_check`` in the extras).
 3. ``shear``: the upper piston and the sidewall rotate at ω, from the quasi-static criterion
@@ -101,6 +102,9 @@ class Scene(Strict):
     compression_inertial_number: float = Field(1e-3, gt=0, description="I_c = (v_max/h) x50 sqrt(rho/sigma) "
                                                                        "fixes the servo speed limit")
     servo_gain: float = Field(1.0, gt=0, description="kp: v = v_max kp (F_target - F)/F_target")
+    travel_time_factor: float = Field(1.5, ge=1, description="the compression lasts this many travel times at v_max "
+                                                             "(the piston slows where the loose column pushes back) "
+                                                             "plus the settling time")
     settle_time_constants: float = Field(40.0, gt=0, description="servo time constants added to the travel time")
     average_window: float = Field(0.25, gt=0, le=1, description="fraction of the settling time (the "
                                                                   "compression's last settle_time_constants servo "
@@ -329,7 +333,7 @@ def derive(case, common: Params) -> ShearCellParams:
     tau_servo = F_target / (v_max * s.servo_gain * k_bulk)
     t_travel = g["travel_estimate"] / v_max
     n_settle = int(math.ceil(s.settle_time_constants * tau_servo / dt))
-    n_compress = int(math.ceil(1.5 * t_travel / dt)) + n_settle
+    n_compress = int(math.ceil(s.travel_time_factor * t_travel / dt)) + n_settle
     skin = max(0.5 * s.psd.d_max / 2, 2.5 * v_max * dt * 1.0)
     if v_max >= skin / (2 * dt):
         raise DerivationError(f"servo speed {v_max:.3g} m/s exceeds skin/(2 dt) = {skin / (2 * dt):.3g} m/s")

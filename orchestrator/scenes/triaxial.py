@@ -295,8 +295,8 @@ def size_range(case) -> tuple[float, float]:
     lo, hi = case.scene.psd.bounds()
     if case.scene.particles.shape == "clumps":
         shapes = _clump_library(case.scene.particles.library)
-        r_lo = min(float(sh[:, 3].min()) * equivalent_scale(sh, lo, v) for sh, (v, _) in shapes)
-        r_hi = max(float(sh[:, 3].max()) * equivalent_scale(sh, hi, v) for sh, (v, _) in shapes)
+        r_lo = min(float(sh[:, 3].min()) * equivalent_scale(sh, lo, v) for sh, (v, _), _ in shapes)
+        r_hi = max(float(sh[:, 3].max()) * equivalent_scale(sh, hi, v) for sh, (v, _), _ in shapes)
         return r_lo, r_hi
     return lo / 2, hi / 2
 
@@ -305,13 +305,14 @@ _LIB_CACHE: dict = {}
 
 
 def _clump_library(path) -> list:
-    """[(shape (m, 4), (union volume, centre of mass))] of a clump library, cached by path."""
+    """[(shape (m, 4), (union volume, centre of mass), bounding radius about it)] of a clump library
+    in the library's units, cached by path."""
     key = str(Path(path).resolve())
     if key not in _LIB_CACHE:
         out = []
         for sh in load_library(path):
             mp = mass_properties(sh)
-            out.append((sh, (mp["volume"], mp["center"])))
+            out.append((sh, (mp["volume"], mp["center"]), bounding_radius(sh, mp["center"])))
         _LIB_CACHE[key] = out
     return _LIB_CACHE[key]
 
@@ -325,8 +326,15 @@ def _clump_draw(case, d: np.ndarray):
     k = rng.integers(len(lib), size=len(d))
     q = random_quaternions(len(d), rng)
     scale = np.array([equivalent_scale(lib[kk][0], di, lib[kk][1][0]) for kk, di in zip(k, d)])
-    rb = np.array([bounding_radius(lib[kk][0], lib[kk][1][1]) * sc for kk, sc in zip(k, scale)])
+    rb = np.array([lib[kk][2] * sc for kk, sc in zip(k, scale)])
     return k, q, scale, rb, float((np.sum(rb ** 3) / np.sum((d / 2) ** 3)) ** (1 / 3))
+
+
+def _member_count(case, d: np.ndarray) -> int:
+    """Member spheres the engines integrate for clump grains of diameters ``d`` (the shape draw of
+    :func:`_clump_draw`)."""
+    members = np.array([len(sh) for sh, _, _ in _clump_library(case.scene.particles.library)])
+    return int(members[_clump_draw(case, d)[0]].sum())
 
 
 def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
@@ -340,7 +348,7 @@ def build_clumps(case, d: np.ndarray, R: float, H: float) -> tuple[np.ndarray, n
     centres, _ = cached_packing(rb, R, H, case.seed + 2)
     members, owner = [], []
     for i in range(len(d)):
-        sh, (_, com) = lib[k[i]]
+        sh, (_, com), _ = lib[k[i]]
         members.append(place(sh, centres[i], scale[i], q[i], com))
         owner.append(np.full(len(sh), i))
     m = np.vstack(members)
@@ -399,7 +407,7 @@ def inserted_clumps(case, d: np.ndarray) -> dict:
             count = int(np.sum(k[g] == s))
             if count == 0:
                 continue
-            sh, (V, com) = lib[s]
+            sh, (V, com), _ = lib[s]
             scale = equivalent_scale(sh, dc, V)
             sp = np.column_stack([(sh[:, :3] - com) * scale, sh[:, 3] * scale])
             mp = mass_properties(sp, density=rho)
@@ -632,9 +640,7 @@ def derive(case, common: Params) -> TriaxialParams:
     params = {
         "n": n, "ids": list(range(1, n + 1)), "diameters": d.tolist(),
         # clumps: the member spheres the engines integrate (same shape draw in both engines)
-        "n_spheres": (None if s.particles.shape != "clumps" else
-                      int(sum(len(_clump_library(s.particles.library)[kk][0])
-                              for kk in _clump_draw(case, d)[0]))),
+        "n_spheres": (None if s.particles.shape != "clumps" else _member_count(case, d)),
         "diameter": D, "height": H, "d50": d50, "pressure": p, "axial_strain": s.axial_strain,
         "strain_rate": rate, "inertial_number": s.inertial_number, "shear_steps": shear_steps,
         "iso": {"chunk": iso_chunk, "max_chunks": s.isotropic.max_chunks, "tolerance": s.isotropic.tolerance,
