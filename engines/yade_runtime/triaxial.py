@@ -24,7 +24,8 @@ class Controller:
     strain_rate [1/s], shear_steps, platen_radius [m] (the platens are fixed spheres of that
     radius), radius0 [m], series_columns, correction_rows, correction_gain, correction_limit,
     drag_free_end, drag_viscosity [Pa s], drag_ramp_steps (0: the drag goes off at once), node_drag, friction,
-    iso_friction, particle_mat (material id).
+    iso_friction, particle_mat (material id), restore_friction_early (optional: contact.friction once stage 1
+    has converged with the drag, before its ramp).
     ``bodies``: bot, top (platen ids), ids, pids (grains), clump_ids (or None).
     ``membrane``: a :class:`.membrane.Membrane`; ``rec``: the :class:`.recorder.Recorder`;
     ``drag``: the stage-1 LinearDragEngine; ``state``: a checkpoint's saved state (resume)."""
@@ -192,6 +193,9 @@ class Controller:
         if c["drag_free_end"] and conv and self.grain_drag_on():
             # converged with the drag: switch it off (or ramp it to zero) and converge again without it
             conv = False
+            if c.get("restore_friction_early"):
+                # isotropic.restore_friction: before_drag_ramp (the ramp then acts on a frictional packing)
+                self.restore_friction()
             if c["drag_ramp_steps"] > 0:
                 self.ramp_start = O.iter
                 print("ISO converged with drag: drag ramped to zero over %d steps from step %d"

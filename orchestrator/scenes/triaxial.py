@@ -176,6 +176,11 @@ class Isotropic(Strict):
                                                        "§2.1); contact.friction is restored when stage 1 ends, which "
                                                        "leaves the isotropic equilibrium unchanged (a wider Coulomb "
                                                        "cone admits the same contact forces)")
+    restore_friction: Literal["at_loading", "before_drag_ramp"] = Field(
+        "at_loading", description="when contact.friction replaces the preparation friction: at the start of loading "
+                                  "(default), or when stage 1 has converged with the drag, before the drag's ramp "
+                                  "to zero, so that the drag leaves a frictional packing (fewer contacts at their "
+                                  "Coulomb limit) that is less prone to local collapse once nothing damps it")
 
 
 class Membrane(Strict):
@@ -649,6 +654,7 @@ def derive(case, common: Params) -> TriaxialParams:
                 "drag_free_end": bool(s.isotropic.drag_free_end and nu > 0),
                 # preparation friction (stage 1), restored to contact.friction for loading
                 "friction": (s.isotropic.friction if s.isotropic.friction is not None else case.contact.friction),
+                "restore_friction": s.isotropic.restore_friction,
                 "drag_coefficient": 6 * math.pi * nu,
                 # linear ramp of the drag coefficient to zero once stage 1 has converged with it (whole chunks)
                 "drag_ramp_steps": drag_ramp_steps, "drag_ramp_time": drag_ramp_time},
