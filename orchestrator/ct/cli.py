@@ -1,4 +1,4 @@
-"""Command line of the CT side: ``orchestrator ct synth|segment|track``.
+"""Command line of the CT side: ``orchestrator ct synth|segment|track|shapes``.
 
 The lead's CLI wires :func:`add_ct_parser` into its sub-commands; each ``*_main(args)`` takes the
 parsed :class:`argparse.Namespace` and returns an exit code. Lengths on the command line carry
@@ -12,7 +12,9 @@ File layout:
   SH invariants R0..R15 unless ``--no-shape``), ``<out>/<scan>_contacts.csv`` and, with
   ``--labels``, ``<out>/<scan>_labels.tif``;
 * ``ct track`` reads those grain tables (and the scans for ``--method rotation``) and writes
-  ``frames.h5`` in the common frame format.
+  ``frames.h5`` in the common frame format;
+* ``ct shapes`` writes a clump shape library (YAML of :func:`orchestrator.clumps.load_library`) from
+  one scan or one ``<scan>_labels.tif`` (with its ``<scan>_grains.csv``).
 """
 from __future__ import annotations
 
@@ -21,13 +23,14 @@ import sys
 
 from ..case import load_case
 from .case_run import run_ct_case
-from .commands import segment_main, synth_main, track_main
+from .commands import segment_main, shapes_main, synth_main, track_main
 
-__all__ = ["add_ct_parser", "run_main", "main", "synth_main", "segment_main", "track_main"]
+__all__ = ["add_ct_parser", "run_main", "main", "synth_main", "segment_main", "track_main", "shapes_main"]
 
 
 def add_ct_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``ct`` with sub-commands ``synth``, ``segment``, ``track`` to an argparse subparsers object."""
+    """Add ``ct`` with sub-commands ``synth``, ``segment``, ``track``, ``run``, ``shapes`` to an argparse
+    subparsers object."""
     ct = subparsers.add_parser("ct", help="X-ray CT: synthetic scans, segmentation, tracking")
     sub = ct.add_subparsers(dest="ct_command", required=True)
 
@@ -72,6 +75,21 @@ def add_ct_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--runs", default="runs", help="runs directory (default ./runs)")
     p.add_argument("--force", action="store_true", help="process the series again")
     p.set_defaults(func=run_main)
+
+    p = sub.add_parser("shapes", help="clump shape library (YAML for particles.library) from a scan's grains")
+    p.add_argument("input", help="a scan (TIFF, directory of slices, .npy, raw), or <scan>_labels.tif of "
+                   "`ct segment --labels` with <scan>_grains.csv beside it")
+    p.add_argument("-o", "--out", required=True, help="library to write (.yaml)")
+    p.add_argument("--spheres", type=int, default=6, help="most spheres per clump (default 6)")
+    p.add_argument("--coverage", type=float, default=0.97, help="stop adding spheres at this covered fraction of a grain")
+    p.add_argument("--min-voxels", type=int, default=1000, help="smallest grain [voxels] to use (default 1000)")
+    p.add_argument("--keep-flagged", action="store_true", help="also use grains flagged over/under-segmented")
+    p.add_argument("--voxel-size", help='voxel edge if the file lacks it, e.g. "2.2 um"')
+    p.add_argument("--shape", nargs=3, type=int, metavar=("NZ", "NY", "NX"), help="raw volume: shape")
+    p.add_argument("--dtype", help="raw volume: dtype (uint8, uint16, float32 ...)")
+    p.add_argument("--sigma", type=float, default=1.0, help="Gaussian filter sigma [voxels] of the segmentation")
+    p.add_argument("--h", help='marker height of the segmentation, e.g. "2 um" (default: segment\'s)')
+    p.set_defaults(func=shapes_main)
     return ct
 
 

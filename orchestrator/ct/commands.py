@@ -1,4 +1,4 @@
-"""The CT commands (``orchestrator ct synth|segment|track``): each ``*_main(args)`` takes the parsed
+"""The CT commands (``orchestrator ct synth|segment|track|shapes``): each ``*_main(args)`` takes the parsed
 :class:`argparse.Namespace` of :mod:`.cli` and returns an exit code; :mod:`.case_run` calls them for a
 case's scan series. Lengths carry units ("2.2 um"), converted with :func:`orchestrator.units.to_si`.
 """
@@ -14,11 +14,11 @@ from rich.progress import Progress
 
 from ..frames import Frames, write_frames
 from ..units import to_si
-from . import segment, shape, synth, track
+from . import clumpfit, segment, shape, synth, track
 from .export import write_ct_frames
 from .io import Scan, ScanError, check_series, read_scan, write_scan
 
-__all__ = ["synth_main", "segment_main", "track_main"]
+__all__ = ["synth_main", "segment_main", "track_main", "shapes_main"]
 
 
 def _length(s):
@@ -63,15 +63,21 @@ def synth_main(args) -> int:
     return 0
 
 
-def segment_main(args) -> int:
-    con = Console(stderr=True)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+def _scan_options(args) -> dict:
+    """read_scan's keywords from the command line: voxel size, and shape and dtype of a raw volume."""
     kw = {}
     if args.voxel_size:
         kw["voxel_size"] = _length(args.voxel_size)
     if args.shape:
         kw["shape"], kw["dtype"] = tuple(args.shape), args.dtype
+    return kw
+
+
+def segment_main(args) -> int:
+    con = Console(stderr=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    kw = _scan_options(args)
     try:
         scans = [read_scan(p, **kw) for p in args.scans]
         check_series(scans)
@@ -143,4 +149,65 @@ def track_main(args) -> int:
         s = L.summary()
         con.print(f"scan {k}->{k + 1}: {s['linked']} linked, {s['lost']} lost, {s['new']} new")
     con.print(f"wrote {args.out}")
+    return 0
+
+
+def shapes_main(args) -> int:
+    """A clump shape library (YAML for ``scene.particles.library``) from one scan, which is segmented
+    first, or from a label volume ``<scan>_labels.tif`` of ``ct segment --labels`` with its
+    ``<scan>_grains.csv`` beside it."""
+    con = Console(stderr=True)
+    src, out = Path(args.input), Path(args.out)
+    if out.suffix.lower() not in (".yaml", ".yml"):
+        con.print(f"[red]error:[/red] {out}: a shape library is written as YAML; give -o/--out ending in .yaml")
+        return 2
+    if args.spheres < 1 or not 0 < args.coverage <= 1:
+        con.print(f"[red]error:[/red] --spheres {args.spheres} --coverage {args.coverage}: give at least 1 sphere "
+                  "and a coverage in (0, 1], e.g. --spheres 6 --coverage 0.97")
+        return 2
+    kw = _scan_options(args)
+    try:
+        sc = read_scan(args.input, **kw)
+    except ScanError as e:
+        con.print(f"[red]error:[/red] {e}")
+        return 2
+    meta = {"source": str(src), "voxel_size": sc.voxel_size, "n_spheres": args.spheres, "coverage": args.coverage,
+            "min_voxels": args.min_voxels, "skip_flagged": not args.keep_flagged}
+    if src.stem.endswith("_labels"):
+        table = src.with_name(src.stem[: -len("_labels")] + "_grains.csv")
+        if not table.exists():
+            con.print(f"[red]error:[/red] {src}: a label volume needs its grain table {table} (written beside it by "
+                      "`orchestrator ct segment --labels`); or give the scan itself")
+            return 2
+        grains = pd.read_csv(table)
+        missing = {"label", "n_voxels", "at_border", "flag", "z0", "y0", "x0", "z1", "y1", "x1"} - set(grains.columns)
+        if missing:
+            con.print(f"[red]error:[/red] {table}: columns {sorted(missing)} missing; write it again with "
+                      "`orchestrator ct segment --labels`")
+            return 2
+        labels = sc.volume.astype(np.int32)
+        meta["grain_table"] = str(table)
+    else:
+        try:
+            seg = segment.segment(sc, sigma=args.sigma, h=_length(args.h), progress=True)
+        except segment.SegmentationError as e:
+            con.print(f"[red]error:[/red] {e}")
+            return 2
+        grains, labels = seg.grains, seg.labels
+        meta["segment"] = {k: v for k, v in seg.params.items() if v is not None}
+    keep = clumpfit.library_grains(grains, args.min_voxels, not args.keep_flagged)
+    if not keep.any():
+        n_border = int(grains["at_border"].astype(bool).sum())
+        n_small = int((grains["n_voxels"] < args.min_voxels).sum())
+        con.print(f"[red]error:[/red] {src}: no grain for the library among {len(grains)} ({n_border} at the scan "
+                  f"border, {n_small} under --min-voxels {args.min_voxels}, the rest flagged over/under-segmented); "
+                  "lower --min-voxels or add --keep-flagged")
+        return 2
+    shapes, quality = clumpfit.shape_library_from_labels(labels, sc.voxel_size, grains[keep], n_spheres=args.spheres,
+                                                         coverage=args.coverage)
+    clumpfit.write_shape_library(out, shapes, quality["name"], meta=meta, quality=quality,
+                                 comment=f"clump shape library from {src} (orchestrator ct shapes)")
+    med = quality[["volume_ratio", "coverage", "outside"]].median()
+    con.print(f"wrote {out}: {len(shapes)} shapes of {len(grains)} grains; median volume ratio "
+              f"{med['volume_ratio']:.3f}, coverage {med['coverage']:.3f}, outside {med['outside']:.3f}")
     return 0
