@@ -334,6 +334,7 @@ def read_case_data(path, _seen=()) -> dict:
         data = {}
     if not isinstance(data, dict):
         raise CaseError(path, [f"the top level must be a mapping of fields, got {type(data).__name__}"])
+    _file_relative(data, path)
     parent = data.pop("extends", None)
     if parent is not None:
         ppath = (path.parent / parent).resolve()
@@ -343,6 +344,16 @@ def read_case_data(path, _seen=()) -> dict:
             raise CaseError(path, [f"extends: {parent}: no such file (looked at {ppath})"])
         data = _merge(read_case_data(ppath, _seen + (ppath,)), data)
     return data
+
+
+def _file_relative(data: dict, path: Path) -> None:
+    """A file a case names (``scene.particles.library``) is relative to the case file that names it,
+    as ``extends:`` is: made absolute here, file by file along the ``extends:`` chain."""
+    particles = (data.get("scene") or {}).get("particles") if isinstance(data.get("scene"), dict) else None
+    if isinstance(particles, dict) and isinstance(particles.get("library"), str):
+        lib = Path(particles["library"]).expanduser()
+        if not lib.is_absolute():
+            particles["library"] = str((path.parent / lib).resolve())
 
 
 def yaml_or_case_error(path: Path):

@@ -21,6 +21,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 
 class LibraryError(ValueError):
@@ -41,8 +42,8 @@ def load_library(path) -> list[np.ndarray]:
             raise LibraryError(f"{path}: 'spheres' must be (M, 4) and 'shape' (M,), got {sp.shape} and {idx.shape}")
         shapes = [sp[idx == k] for k in range(int(idx.max()) + 1)] if len(sp) else []
     elif path.suffix.lower() in (".yaml", ".yml"):
-        import yaml
-        doc = yaml.safe_load(path.read_text())
+        # libCYAML's loader where PyYAML has it (the same documents, ~10x faster than the pure-Python one)
+        doc = yaml.load(path.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
         if not isinstance(doc, dict) or not isinstance(doc.get("shapes"), list):
             raise LibraryError(f"{path}: a YAML library needs 'shapes: [{{name: ..., spheres: [[x, y, z, r], ...]}}]'")
         shapes = []

@@ -101,6 +101,20 @@ def test_case_option_is_validated(tmp_path):
     assert size_range(case)[0] < case.scene.psd.bounds()[0] / 2
 
 
+def test_library_path_is_relative_to_the_case_file(tmp_path):
+    """scene.particles.library names a file beside the case that sets it (as extends: does), not
+    one relative to the working directory."""
+    (tmp_path / "shapes").mkdir()
+    (tmp_path / "shapes" / "lib.yaml").write_text(LIB.read_text())
+    (tmp_path / "sub").mkdir()
+    parent = tmp_path / "parent.yaml"
+    parent.write_text(f"extends: {SMOKE}\nscene: {{particles: {{shape: clumps, library: shapes/lib.yaml}}}}\n")
+    child = tmp_path / "sub" / "child.yaml"
+    child.write_text("extends: ../parent.yaml\nname: child\n")
+    case = load_case(child)
+    assert Path(case.scene.particles.library) == (tmp_path / "shapes" / "lib.yaml").resolve()
+
+
 def test_dry_run_sizes_the_member_spheres():
     """A clump case is sized (particles, memory, frames.h5, engine time) on the member spheres the
     engines integrate, which build_clumps places, not on the grain count."""

@@ -414,15 +414,17 @@ def inserted_clumps(case, d: np.ndarray) -> dict:
                 continue
             sh, (V, com), _ = lib[s]
             scale = equivalent_scale(sh, dc, V)
-            sp = np.column_stack([(sh[:, :3] - com) * scale, sh[:, 3] * scale])
-            mp = mass_properties(sp, density=rho)
-            sp[:, :3] -= mp["center"]               # centred on this grid's centre of mass
-            I = mp["inertia"]
+            sp = np.column_stack([(sh[:, :3] - com) * scale, sh[:, 3] * scale])   # centred on the centre of mass
+            # the union's properties scale with the shape (the integration grid scales with its bounding box):
+            # volume s^3, inertia rho s^5 times those of the library shape (remembered, unit density)
+            mp0 = mass_properties(sh)
+            vol = mp0["volume"] * scale ** 3
+            I = rho * mp0["inertia"] * scale ** 5
             templates.append({
                 "shape": s, "size_class": c, "diameter": dc, "count": count, "nspheres": int(len(sp)),
-                "spheres": sp.tolist(), "mass": mp["mass"], "volume": mp["volume"],
+                "spheres": sp.tolist(), "mass": rho * vol, "volume": vol,
                 "inertia": [I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]],
-                "principal": mp["principal"].tolist(),
+                "principal": (rho * mp0["principal"] * scale ** 5).tolist(),
                 "bounding_radius": float(np.max(np.linalg.norm(sp[:, :3], axis=1) + sp[:, 3])),
             })
     n = len(d)
