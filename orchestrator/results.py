@@ -160,9 +160,12 @@ def _triaxial(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict, s
             KeyResult("final volumetric strain (compression +)", 100 * s.get("final_volumetric_strain", np.nan), "%"),
         ]
     iso = (summary.get("scene") or {}).get("isotropic_end") or summary.get("isotropic_end") or {}
-    e = iso.get("void_ratio")
-    if isinstance(e, (int, float)):
-        rows.append(KeyResult("void ratio at the start of loading", float(e), "", None, "", "0.593 (CT, §2.1)"))
+    e = iso.get("void_ratio") or {}
+    if isinstance(e.get("interior"), (int, float)):
+        rows.append(KeyResult("void ratio at the start of loading, interior", float(e["interior"]), "", None, "",
+                              "0.593 (CT, §2.1)"))
+    if isinstance(e.get("hull"), (int, float)):
+        rows.append(KeyResult("void ratio at the start of loading, grains' hull", float(e["hull"]), ""))
     return rows
 
 

@@ -51,3 +51,25 @@ def test_peak_stress_ratio_ignores_a_single_noisy_row():
 def test_peak_stress_ratio_short_series():
     peak = peak_stress_ratio(np.array([2.0, 3.0]), np.array([1.0, 1.0]), smoothing_rows(2))
     assert peak["smoothed"] == 3.0 and peak["instantaneous"] == 3.0
+
+
+def test_void_ratio_of_a_lattice_sample():
+    """A simple cubic lattice of touching spheres (φ = π/6, e = 6/π - 1 = 0.910) in a cylinder:
+    the interior void ratio is the lattice's; the boundary and hull ones include the voids along the
+    lateral boundary and are larger; with no boundary voids (volume = the lattice's cells) they are exact."""
+    from orchestrator.scenes.triaxial import hull_volume, void_ratios
+    r, R, H = 1.0, 12.0, 30.0
+    g = np.arange(-R, R + 1e-9, 2 * r)
+    x, y, z = np.meshgrid(g, g, np.arange(r, H - r + 1e-9, 2 * r), indexing="ij")
+    pos = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    pos = pos[np.hypot(pos[:, 0], pos[:, 1]) <= R - r]
+    rad = np.full(len(pos), r)
+    vs = float(np.sum(4 / 3 * np.pi * rad ** 3))
+    vh = hull_volume(pos, rad, 0.0, H)
+    e = void_ratios(pos, rad, vs, np.pi * R ** 2 * H, vh, 0.0, H, 2 * r)
+    lattice = 6 / np.pi - 1
+    assert abs(e["interior"] - lattice) < 0.05 * lattice, e
+    assert e["hull"] > e["interior"] and e["boundary"] > e["hull"]
+    cells = len(pos) * (2 * r) ** 3
+    assert abs(void_ratios(pos, rad, vs, cells, cells, 0.0, H, 2 * r)["boundary"] - lattice) < 1e-12
+    assert void_ratios(pos, rad, vs, cells, vh, 0.0, H, 2 * r, spheres=False)["interior"] is None

@@ -67,6 +67,11 @@ from . import base
 
 # scipy.spatial is imported on first use (scipy.optimize: in orchestrator.psd): every case load
 # imports this scene, and they cost ~0.6 s (validate within 2 s, #16)
+def cKDTree(*args, **kwargs):  # noqa: N802 - scipy's name (deferred as ConvexHull below)
+    from scipy.spatial import cKDTree as f
+    return f(*args, **kwargs)
+
+
 def ConvexHull(*args, **kwargs):  # noqa: N802 - scipy's name
     from scipy.spatial import ConvexHull as f
     return f(*args, **kwargs)
@@ -832,6 +837,56 @@ def hull_volume(pos: np.ndarray, r: np.ndarray, z_bottom: float | None = None, z
     return float(ConvexHull(np.vstack([pts, pos])).volume)
 
 
+def _solid_volume(sc: dict, r: np.ndarray) -> float | None:
+    """Solid volume [m³] of the sample: Σ 4/3 π r³ of the spheres; for LIGGGHTS' inserted clumps the
+    templates' union volumes times their counts; None for placed clumps (members overlap, and the
+    run keeps no per-clump volume)."""
+    cl = sc.get("clumps")
+    if not cl:
+        return float(np.sum(4 / 3 * np.pi * r ** 3))
+    tpl = (cl.get("inserted") or {}).get("templates") if isinstance(cl, dict) else None
+    return float(sum(t["volume"] * t["count"] for t in tpl)) if tpl else None
+
+
+def void_ratios(pos: np.ndarray, r: np.ndarray, solid_volume: float, volume_boundary: float,
+                volume_hull: float, z_bottom: float, z_top: float, d50: float, spheres: bool = True) -> dict:
+    """Void ratio e = V_voids / V_solid [-] of the sample three ways: inside the lateral boundary
+    (``boundary``: the membrane's or shell's volume between the platens), inside the grains' convex
+    hull (``hull``), and in an interior measurement cylinder (``interior``: radius 0.6 R with R the
+    hull's equivalent radius, 2 d50 clear of each platen; the solid fraction is the fraction of a
+    regular grid of points, d50/6 apart, that lie inside a sphere, as a CT void ratio counts voxels;
+    spheres only, None for clumps). The first two include the voids along the boundary, which a CT
+    void ratio of the specimen's interior does not (seed 001 §2: e = 0.593 before loading).
+    ``solid_volume`` [m³]: :func:`_solid_volume`."""
+    out = {"boundary": volume_boundary / solid_volume - 1, "hull": volume_hull / solid_volume - 1, "interior": None,
+           "solid_volume": solid_volume}
+    ok = ~np.isnan(pos).any(axis=1)
+    H = z_top - z_bottom
+    lo, hi = z_bottom + 2 * d50, z_top - 2 * d50
+    if not spheres or hi <= lo or not ok.any():
+        return out
+    pos, r = pos[ok], r[ok]
+    rc = 0.6 * np.sqrt(volume_hull / (np.pi * H))
+    h = d50 / 6
+    gx = np.arange(-rc + h / 2, rc, h)
+    gz = np.arange(lo + h / 2, hi, h)
+    X, Y = np.meshgrid(gx, gx, indexing="ij")
+    disk = np.hypot(X, Y).ravel() < rc
+    xy = np.column_stack([X.ravel()[disk], Y.ravel()[disk]])
+    tree = cKDTree(pos)
+    k = min(len(pos), 24)                                 # a point in a sphere: one of its 24 nearest centres (PSD 1:3.4)
+    solid = 0
+    for z in gz:                                          # one layer of points at a time
+        pts = np.column_stack([xy, np.full(len(xy), z)])
+        dist, idx = tree.query(pts, k=k)
+        dist, idx = dist.reshape(len(pts), k), idx.reshape(len(pts), k)
+        solid += int(np.count_nonzero((dist < r[idx]).any(axis=1)))
+    phi = solid / (len(xy) * len(gz))
+    out["interior"] = 1 / phi - 1 if phi > 0 else None
+    out["interior_solid_fraction"] = phi
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # Post-processing hooks (engine adapters call these before writing frames.h5)
 # ---------------------------------------------------------------------------------------------
@@ -936,6 +991,13 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
                                  # at isotropic.max_chunks and loading started from this state)
                                  "converged": bool(abs(s1i / p - 1) < sc["iso"]["tolerance"]
                                                    and abs(s3i / p - 1) < sc["iso"]["tolerance"])}
+        # the void ratio when loading begins (the frame at the end of stage 1), seed 001 §2: 0.593 (CT)
+        j0 = a["k0"]
+        vs = _solid_volume(sc, np.asarray(r, dtype=float))
+        if vs:
+            summ["isotropic_end"]["void_ratio"] = void_ratios(
+                positions(k0), np.asarray(r, dtype=float), vs, float(s["volume"][j0]), float(vh[k0]),
+                float(s["z_bottom"][j0]), float(s["z_top"][j0]), float(sc["d50"]), spheres=not sc.get("clumps"))
     if shear.any():
         # lateral stress stray during shear, on averages over one series window of 10 rows
         e3 = a["sigma3"][shear] / p - 1
