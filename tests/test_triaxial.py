@@ -12,6 +12,7 @@ checks the per-frame outputs (rotations, particle stress, contacts) and their si
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -127,6 +128,45 @@ def test_preparation_friction_then_contact_friction(runs, eng):
     assert at["prep"][mu_prep] >= 0.02 and at["prep"][mu] == 0.0, at
     assert at["load"][mu] >= 0.02, at
     assert 0.6 * mu <= q90["load"] <= 1.1 * mu, q90
+
+
+@pytest.mark.engine
+@pytest.mark.slow
+@pytest.mark.parametrize("eng", ENGINES)
+def test_friction_restored_before_the_drag_ramp(tmp_path, eng):
+    """``isotropic.restore_friction: before_drag_ramp``: contact.friction (0.5) replaces the
+    preparation friction (0.1) once stage 1 has converged with the drag, so in the stage-1 frames
+    of the ramp some strong grain-grain contact carries |F_t|/|F_n| above 0.2 (impossible at the
+    preparation friction, whose sliding contacts sit at 0.1: test above), and at the end of stage 1
+    none of them sits at 0.1 (the default leaves >= 2 % there). The smoke case loaded to 1 % with its
+    frame interval (frames 2 for 1 % instead of 10 for 5 %: the same stage-1 chunks)."""
+    from orchestrator.runner import run_case
+    case = load_case(SMOKE, overrides={"scene": {"axial_strain": 0.01, "frames": 2,
+                                                 "isotropic": {"restore_friction": "before_drag_ramp"}}})
+    mu_prep, mu = case.scene.isotropic.friction, case.contact.friction
+    out = run_case(case, eng, runs_root=tmp_path, progress=False)
+    assert out.summary["status"] == "complete", out.summary.get("error")
+    log = (out.run_dir / "engine.log").read_text()
+    ramp = [int(m) for m in re.findall(r"drag ramped to zero over \d+ steps from step (\d+)", log)]
+    assert ramp, "stage 1 never converged with the drag: no ramp to test"
+    assert re.search(r"^FRICTION restored", log, re.M), "no friction switch in the engine log"
+    ratios = {}
+    with h5py.File(out.run_dir / "frames.h5") as f:
+        stage, steps, ids = f["frames/stage"][:], f["frames/step"][:], f["particles/id"][:]
+        for k in np.flatnonzero((stage == 1) & (steps > ramp[0])):
+            g = f["contacts"][str(k)]
+            gg = np.isin(g["i"][:], ids) & np.isin(g["j"][:], ids)
+            fn = np.linalg.norm(g["fn"][:][gg], axis=1)
+            ft = np.linalg.norm(g["ft"][:][gg], axis=1)
+            strong = fn > np.median(fn)
+            ratios[int(steps[k])] = ft[strong] / fn[strong]
+    assert ratios, "no stage-1 frame after the ramp began"
+    last = ratios[max(ratios)]
+    above = max(float(np.max(r)) for r in ratios.values())
+    at_prep = float(np.mean(np.abs(last / mu_prep - 1) < 2e-3))
+    print(f"{eng}: largest |Ft|/|Fn| in the ramp's frames {above:.3f}; at {mu_prep} at the end of stage 1: {at_prep:.3%}")
+    assert 2 * mu_prep < above <= 1.1 * mu      # LIGGGHTS: sticking contacts exceed μ by their dashpot (≤ 11 %)
+    assert at_prep == 0.0
 
 
 @pytest.mark.engine
