@@ -15,6 +15,7 @@ from orchestrator.case import load_case
 from orchestrator.derive import derive
 from orchestrator.geometry import Mesh, MeshError, box, check_manifold, cylinder_shell, read_stl, vaned_piston
 from orchestrator.psd import lognormal_diameters, max_overlap, pack_cylinder
+from orchestrator.scenes.shear_cell import SERVO_DASHPOT_GAIN, geometry_numbers, servo_dashpot_gain
 from orchestrator.scenes import shear_cell
 from shear_cell_protocol import check_smoke_protocol
 
@@ -108,6 +109,25 @@ def test_loose_packing_has_no_overlap_and_requested_fraction():
     assert vol / box_vol == pytest.approx(case.scene.loose_fraction, rel=0.05)
     with pytest.raises(ValueError, match="too small"):
         pack_cylinder(np.full(500, 1.0), 5.0, 0.0, 5.0, 1)
+
+
+def test_servo_speed_keeps_the_dashpot_loop_stable():
+    """The piston servo's loop gain against its contacts' dashpots, G = v_max kp γ_w/F_c, stays at
+    or below SERVO_DASHPOT_GAIN: on the tall medium cell the compression inertial number alone asks
+    for 0.47 m/s (G = 2.7, where the servo alternated every step and held 1.22 x the target), so its
+    speed is capped; the thinner cells' speeds are what I_c gives."""
+    for name in ("shear_cell_smoke", "shear_cell_small", "shear_cell_default", "shear_cell_medium"):
+        case = load_case(CASES / f"{name}.yaml")
+        sv = derive(case).scene.servo
+        s = case.scene
+        v_ic = (s.compression_inertial_number / (s.psd.median * math.sqrt(case.material.density / s.normal_stress))
+                * geometry_numbers(case)["h_dense_estimate"])
+        G = servo_dashpot_gain(case, sv["v_max"], sv["kp"])
+        assert G <= SERVO_DASHPOT_GAIN * (1 + 1e-12), (name, G)
+        if name == "shear_cell_medium":
+            assert servo_dashpot_gain(case, v_ic, sv["kp"]) > 2 and sv["v_max"] < 0.3 * v_ic
+        else:
+            assert sv["v_max"] == v_ic, name
 
 
 def test_quasi_static_omega_and_frame_schedule():
