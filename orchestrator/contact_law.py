@@ -135,6 +135,17 @@ def sliding_threshold_angle(mu: float, e_n: float) -> float:
 # ----------------------------------------------------------------------------------------------
 # Restitution under Tsuji damping with tensile clipping
 # ----------------------------------------------------------------------------------------------
+def wall_dashpot_coefficient(E_eff: float, R_eff: float, m_eff: float, force: float, damping: str,
+                             restitution: float) -> float:
+    """Normal dashpot coefficient γ [N s/m] of a Hertz contact carrying ``force`` [N] (overlap
+    ξ = (3F/(4 E* √R))^(2/3)): seed 000's γ_n √ξ with γ_n = √(4/3 E* m*) for ``damping`` "seed000",
+    else Tsuji's 2 √(5/6) |β(e)| √(S_n m*) with S_n = 2 E* √(R ξ) (Tsuji et al. 1992)."""
+    xi = (3 * force / (4 * E_eff * math.sqrt(R_eff))) ** (2 / 3)
+    if damping == "seed000":
+        return math.sqrt(4 / 3 * E_eff * m_eff) * math.sqrt(xi)
+    return 2 * math.sqrt(5 / 6) * abs(tsuji_beta(restitution)) * math.sqrt(2 * E_eff * math.sqrt(R_eff * xi) * m_eff)
+
+
 def damping_ratio(e: float) -> float:
     """Damping ratio ζ of a linear oscillator whose restitution is e: -ln e/√(π² + ln² e)."""
     return -tsuji_beta(e)

@@ -130,6 +130,19 @@ def test_servo_speed_keeps_the_dashpot_loop_stable():
             assert sv["v_max"] == v_ic, name
 
 
+def test_plane_shear_servo_speed_keeps_the_dashpot_loop_stable():
+    """The plane shear's top-wall servo obeys the same cap: the seed case's I_c speed (0.63 m/s)
+    would give G = 10 against the grain-grain dashpots under the wall; the smoke case is uncapped."""
+    from orchestrator.scenes import plane_shear as ps
+    for name, capped in (("plane_shear_smoke", False), ("plane_shear_seed", True)):
+        case = load_case(CASES / f"{name}.yaml")
+        sv = derive(case).scene.servo
+        s = case.scene
+        v_ic = s.compression_inertial_number * ps.geometry(case)["H_dense"] / ps._time_scale(case)
+        assert ps.servo_dashpot_gain(case, sv["v_max"], sv["kp"]) <= SERVO_DASHPOT_GAIN * (1 + 1e-12), name
+        assert (sv["v_max"] < 0.2 * v_ic) if capped else (sv["v_max"] == v_ic), name
+
+
 def test_quasi_static_omega_and_frame_schedule():
     case = load_case(CASES / "shear_cell_seed.yaml")
     sc = derive(case)["scene"]

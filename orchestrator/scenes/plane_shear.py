@@ -13,7 +13,9 @@ Protocol, identical for both engines (absolute step ranges computed here):
 1. ``compress``: the grains, placed by random sequential addition at volume fraction
    ``loose_fraction``, are compressed by the top wall under a proportional force servo
    v_z = -v_max clamp(k_p (F_target - F_z)/F_target, -1, 1), F_target = σ L²; v_max from the
-   compression inertial number I_c = (v_max/H) x₅₀ √(ρ/σ). The stage lasts 1.5 × the travel time at
+   compression inertial number I_c = (v_max/H) x₅₀ √(ρ/σ), capped so that the servo's loop gain
+   against the dashpots under the wall stays ≤ 0.7 (:func:`servo_dashpot_gain`; binds on the seed
+   case: 0.63 -> 0.057 m/s). The stage lasts 1.5 × the travel time at
    v_max plus ``settle_time_constants`` servo time constants.
 2. ``shear``: the top wall moves at v_x = I H x₅₀⁻¹ √(σ/ρ) (inertial number ``inertial_number``,
    H the dense height estimate) up to the shear strain ``shear_strain``; the servo keeps σ.
@@ -33,6 +35,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ..case import Strict, positive
+from ..contact_law import effective_modulus, wall_dashpot_coefficient
 from ..numerics import multiple_of
 from ..derive import adhesion_force, DerivationError
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
@@ -40,7 +43,7 @@ from ..particles_io import ensure_particle_table
 from ..psd import lognormal_diameters, mean_sphere_volume, pack_box
 from ..units import Pressure
 from . import base
-from .shear_cell import PSD
+from .shear_cell import PSD, SERVO_DASHPOT_GAIN
 
 STAGES = {"initial": 0, "compressed": 1, "shear": 2}
 
@@ -125,11 +128,30 @@ def geometry(case) -> dict:
             "box_lo": [0.0, 0.0, 0.0], "box_hi": [L, L, z_top + 3 * d_w + H_loose]}
 
 
+def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
+    """Loop gain G = v_max kp γ/F_c [-] of the top wall's force servo against the dashpots of the
+    grains it pushes (the shear cell's :func:`.shear_cell.servo_dashpot_gain`): the wall is a rigid
+    layer of grains, so its contacts are grain-grain (E*, r_eff = x50/4, m* ≈ m50 against the heavy
+    wall) at the mean contact force F_c = π x50² σ/(4 φ) + F_adh."""
+    s = case.scene
+    x50 = s.psd.median
+    mat = case.material
+    Fc = math.pi * x50 ** 2 * s.normal_stress / (4 * s.dense_fraction) + adhesion_force(case)
+    E = effective_modulus(mat.youngs_modulus, mat.poisson_ratio, mat.youngs_modulus, mat.poisson_ratio)
+    gamma = wall_dashpot_coefficient(E, x50 / 4, mat.density * math.pi / 6 * x50 ** 3, Fc, case.contact.damping,
+                                     case.contact.restitution)
+    return v_max * kp * gamma / Fc
+
+
 def _speeds(case, g=None) -> tuple[float, float]:
+    """(servo speed limit, shear speed) [m/s] from the inertial numbers; the servo's capped so that
+    its loop gain against the contacts' dashpots stays at SERVO_DASHPOT_GAIN (as the shear cell's)."""
     s = case.scene
     g = g or geometry(case)
     T = _time_scale(case)
-    return s.compression_inertial_number * g["H_dense"] / T, s.inertial_number * g["H_dense"] / T
+    v = s.compression_inertial_number * g["H_dense"] / T
+    G = servo_dashpot_gain(case, v, s.servo_gain)
+    return (v if G <= SERVO_DASHPOT_GAIN else v * SERVO_DASHPOT_GAIN / G), s.inertial_number * g["H_dense"] / T
 
 
 def max_velocity(case) -> float:

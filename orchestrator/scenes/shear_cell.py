@@ -38,7 +38,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..atomic import write_json
 from ..case import Strict, positive
-from ..contact_law import effective_modulus, remembered, tsuji_beta
+from ..contact_law import effective_modulus, remembered, wall_dashpot_coefficient
 from ..derive import adhesion_force, DerivationError
 from ..numerics import multiple_of
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
@@ -235,18 +235,13 @@ def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
     else Tsuji's 2 √(5/6) |β(e)| √(S_n m) with S_n = 2 E*_w √(R ξ) (Tsuji et al. 1992)."""
     s = case.scene
     x50 = s.psd.median
-    m = case.material.density * math.pi / 6 * x50 ** 3
-    R = x50 / 2
-    Ew, nuw = case.wall_moduli()
     mat = case.material
-    E_w = effective_modulus(mat.youngs_modulus, mat.poisson_ratio, Ew, nuw)
+    Ew, nuw = case.wall_moduli()
     Fc = _expected_overlap(case, effective_modulus(mat.youngs_modulus, mat.poisson_ratio, mat.youngs_modulus,
                                                    mat.poisson_ratio), adhesion_force(case))[1]
-    xi = (3 * Fc / (4 * E_w * math.sqrt(R))) ** (2 / 3)
-    if case.contact.damping == "seed000":
-        gamma = math.sqrt(4 / 3 * E_w * m) * math.sqrt(xi)
-    else:
-        gamma = 2 * math.sqrt(5 / 6) * abs(tsuji_beta(case.contact.restitution)) * math.sqrt(2 * E_w * math.sqrt(R * xi) * m)
+    gamma = wall_dashpot_coefficient(effective_modulus(mat.youngs_modulus, mat.poisson_ratio, Ew, nuw), x50 / 2,
+                                     mat.density * math.pi / 6 * x50 ** 3, Fc, case.contact.damping,
+                                     case.contact.restitution)
     return v_max * kp * gamma / Fc
 
 
