@@ -225,7 +225,8 @@ SERVO_DASHPOT_GAIN = 0.7
 
 def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
     """Loop gain G = v_max kp γ_w / F_c [-] of the force servo against the dashpots of the grains
-    it pushes. Both engines' servos set the piston speed each step from the force of the step before,
+    it pushes. The servos (LIGGGHTS' mesh servo, measured; YADE's ServoPIDController, the same per-step
+    proportional law, not probed) set the piston speed each step from the force of the step before,
     v = v_max kp (1 - F/F_target); a speed v adds N_c γ_w v to F (N_c = F_target/F_c contacts of
     dashpot γ_w at the mean contact force F_c, :func:`_expected_overlap`), so the speed obeys
     v' = v_max kp (1 - F_el/F_target) - G v: the error alternates in sign each step and decays only
