@@ -98,7 +98,7 @@ def report(run: Path) -> dict:
     if summ.exists():
         s = json.loads(summ.read_text())
         out["isotropic_end"] = {k: s["isotropic_end"].get(k) for k in ("converged", "sigma1_error", "sigma3_error",
-                                                                       "steps")}
+                                                                       "void_ratio", "steps")}
         sh = s.get("shear", {})
         out["sigma3_stray_smoothed"] = sh.get("sigma3_error_max_abs_smoothed")
         out["peak_stress_ratio"] = sh.get("peak_stress_ratio")

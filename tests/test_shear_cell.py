@@ -132,7 +132,7 @@ def test_servo_speed_keeps_the_dashpot_loop_stable():
 
 def test_plane_shear_servo_speed_keeps_the_dashpot_loop_stable():
     """The plane shear's top-wall servo obeys the same cap: the seed case's I_c speed (0.63 m/s)
-    would give G = 10 against the grain-grain dashpots under the wall; the smoke case is uncapped."""
+    would give G = 7.6 against the grain-grain dashpots under the wall; the smoke case is uncapped."""
     from orchestrator.scenes import plane_shear as ps
     for name, capped in (("plane_shear_smoke", False), ("plane_shear_seed", True)):
         case = load_case(CASES / f"{name}.yaml")
