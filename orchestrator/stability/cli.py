@@ -75,21 +75,32 @@ def cmd_convergence(args) -> int:
                  engines=None if args.engine == "all" else [args.engine], runs_root=args.runs,
                  reference=args.reference, target_error=args.target_error, scheduler=args.scheduler,
                  workers=args.workers, plot=args.plot or Path(args.runs) / "convergence" /
-                 f"{Path(args.case).stem}-{args.knob}.png")
+                 f"{Path(args.case).stem}-{args.knob}.png", full=args.full)
     df = out["table"]
     cols = ["engine", args.knob, "status", "engine_time_s", "error"] + [c for c in df.columns if c.startswith("err_")]
     show = df[cols].rename(columns=lambda c: c.replace("err_", "e:"))
     _print_df(show, f"Error against run time: {args.case}, knob {args.knob} (e: relative errors)")
     obs = [c for c in df.columns if c not in cols and c not in ("total_time_s", "reference", "run_id")
-           and not c.startswith("err_")]
+           and not c.startswith("err_") and not c.endswith("_sem")]
     if obs:
         _print_df(df[["engine", args.knob] + obs], "observables")
+    ext = out["extrapolation"]
+    if len(ext):
+        full = "the ideal limit" if args.full is None else f"{args.knob} = {args.full}"
+        _print_df(ext[["engine", "observable", "rungs", "value_full", "sem_full", "cheapest", "cheapest_time_s",
+                       "where"]], f"Extrapolated to full fidelity ({full}): y = a + b h({args.knob}); the cheapest "
+                                  f"{args.knob} predicted within {args.target_error:g} of it")
     if args.csv:
         from ..atomic import write_text
         write_text(args.csv, df.to_csv(index=False))
     con = _console()
     from rich.markup import escape
     for eng, r in out["recommendation"].items():
+        ff = r.get("full_fidelity") or {}
+        if ff.get("value") is not None:
+            con.print(f"[green]{eng}[/green]: within {args.target_error:g} of full fidelity for every observable: "
+                      f"{args.knob} = {ff['value']:.3g} (set by {ff['observable']}; predicted engine time "
+                      f"{ff['engine_time_s']:.3g} s; {ff['where']})")
         con.print(f"[green]{eng}[/green]: recommended {args.knob} = {r[args.knob]} (error {r['error']:.3g}, "
                   f"engine time {r['engine_time_s']:.3g} s{', ' + r['note'] if 'note' in r else ''}); "
                   + escape(f"Pareto front: {r['pareto']}"))
@@ -159,6 +170,9 @@ def add_parsers(sub):
                                                               "reference unless --reference)")
     c.add_argument("--reference", help="the value to compare against (default: the last)")
     c.add_argument("--target-error", type=float, default=0.05)
+    c.add_argument("--full", type=float, help="the knob's full-fidelity value to extrapolate to, e.g. the seed's "
+                                              "stiffness as a multiple of the case's (default: the ideal limit: "
+                                              "dt -> 0, quasi-static, rigid, infinite system)")
     c.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     c.add_argument("--runs", default="runs")
     c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")

@@ -24,6 +24,7 @@ import numpy as np
 from ..case import CaseError, load_case
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
+from .extrapolation import extrapolate, fidelity_distance
 from .sweep import _finished, nested
 from ..analysis._common import save_figure
 
@@ -79,8 +80,10 @@ def pareto(times, errors) -> list[int]:
 
 def ladder(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
            reference=None, target_error: float = 0.05, scheduler=None, workers: int | None = 1,
-           observables_used: list[str] | None = None, plot: str | Path | None = None) -> dict:
-    """Run the ladder and compare; returns {"table": DataFrame, "recommendation": {...}, "plot": path}."""
+           observables_used: list[str] | None = None, plot: str | Path | None = None, full=None) -> dict:
+    """Run the ladder and compare; returns {"table": DataFrame, "recommendation": {...},
+    "extrapolation": DataFrame, "plot": path}. ``full``: the knob's full-fidelity value for the
+    extrapolation (:mod:`.extrapolation`; None: the ideal limit)."""
     import pandas as pd
     case0 = load_case(case_path)
     engines = engines or case0.engines
@@ -128,6 +131,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                     v = obs.get(key)
                     if not isinstance(v, list):
                         row[key] = v
+                        row[f"{key}_sem"] = obs.get(f"{key}_sem")
                     e = relative_error(v, ref_obs[key]) if v is not None else float("nan")
                     row[f"err_{key}"] = e
                     if np.isfinite(e):
@@ -138,10 +142,46 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
         ex.close()
     df = pd.DataFrame(rows)
     rec = recommend(df, knob, target_error)
-    out = {"table": df, "recommendation": rec}
+    ext = extrapolations(df, knob, full=full, tolerance=target_error)
+    for eng, r in rec.items():
+        r["full_fidelity"] = full_fidelity_setting(ext[ext["engine"] == eng], knob)
+    out = {"table": df, "recommendation": rec, "extrapolation": ext}
     if plot:
         out["plot"] = plot_ladder(df, knob, plot, target_error)
     return out
+
+
+def extrapolations(df, knob: str, full=None, tolerance: float = 0.05):
+    """Per engine and scalar observable: the ladder extrapolated to ``full`` and the cheapest
+    setting predicted within ``tolerance`` of it (:func:`.extrapolation.extrapolate`), from the
+    complete rungs."""
+    import pandas as pd
+    rows = []
+    skip = {"engine", knob, "status", "engine_time_s", "total_time_s", "reference", "run_id", "error"}
+    for eng, g in df.groupby("engine"):
+        g = g[g["status"] == "complete"]
+        for key in [c for c in g.columns if c not in skip and not c.startswith("err_") and not c.endswith("_sem")]:
+            y = pd.to_numeric(g[key], errors="coerce").to_numpy(float)
+            sem = pd.to_numeric(g[f"{key}_sem"], errors="coerce").to_numpy(float) if f"{key}_sem" in g else None
+            r = extrapolate(knob, g[knob].to_numpy(float), y, y_sem=sem, full=full, tolerance=tolerance,
+                            times=pd.to_numeric(g["engine_time_s"], errors="coerce").to_numpy(float))
+            if r["rungs"] >= 2:
+                rows.append({"engine": eng, "observable": key, **r})
+    return pd.DataFrame(rows, columns=["engine", "observable", "rungs", "h_full", "value_full", "sem_full", "slope",
+                                       "cheapest", "cheapest_time_s", "where", "note"])
+
+
+def full_fidelity_setting(ext, knob: str) -> dict:
+    """The cheapest setting predicted within tolerance for *every* observable of one engine's
+    extrapolation table: the most demanding observable's (smallest fidelity distance h)."""
+    ok = ext[np.isfinite(ext["cheapest"].to_numpy(float))] if len(ext) else ext
+    if not len(ok):
+        return {"value": None, "observable": None, "note": "no observable could be extrapolated"}
+    h = fidelity_distance(knob, ok["cheapest"].to_numpy(float))
+    k = int(np.argmin(h))
+    row = ok.iloc[k]
+    return {"value": _py(row["cheapest"]), "observable": row["observable"],
+            "engine_time_s": _py(row["cheapest_time_s"]), "where": row["where"]}
 
 
 def _py(v):
