@@ -15,7 +15,13 @@ piston's travel, from the run's wall series):
   upper vane tips (seed: compaction), each cut at the upper vane tips: Δφ < 0 is dilation;
 - layering near the cylinder wall: the number density n(r) of the final frame in 0.25 x50 shells,
   the standard deviation of n over the outer 2 x50 against that over the interior (> 1: layers);
-- the number density inside the band (|z − z_sb| ≤ w_sb/2) against the rest of the packing.
+- the number density inside the band (|z − z_sb| ≤ w_sb/2) against the rest of the packing;
+- the steady angular-velocity profile itself (the shearband analysis' v_φ̃(z), pooled over radii and
+  the steady window, in 2 x50 bins from the lower vane tips, at least six): where its gradient is steepest, the
+  share of the velocity change from the lower to the upper vane tips that happens within the seed's
+  8 x50 around that height (1 for a band of ≤ 8 x50, 8/gap for a uniform shear), and how far eq. 2
+  with the fitted z_sb, w_sb misses it (rms): an erf fitted to a profile that is not an erf still
+  returns a z_sb and a w_sb.
 
 It first prints the run's compression check (the servo force against the target at the end of
 compression, shear_cell_checks.json): outside 2 %, the run is not a valid comparison.
@@ -108,7 +114,46 @@ def report(run_dir: Path) -> dict:
         hb = out["w_sb"]
         hr = (z_upper_tips - z0_last) - hb
         out["n_band_over_rest"] = float((band.sum() / hb) / max(rest.sum() / hr, 1e-30)) if hr > 0 else float("nan")
+    if "z_sb" in out:
+        out.update(velocity_profile(run_dir, case_steady_from(run_dir), z0_last, z_upper_tips, x50,
+                                    out["z_sb"], out["w_sb"]))
     return out
+
+
+def case_steady_from(run_dir: Path) -> float:
+    """The steady window's start [rad] of the run's shearband analysis (seed 000: 10°)."""
+    from orchestrator.analysis import parse_specs
+    case = load_case(run_dir / "case.yaml")
+    opts = next((o for n, o in parse_specs(case.analysis) if n == "shearband"), {})
+    return float(opts.get("steady_from", np.radians(10.0)))
+
+
+def velocity_profile(run_dir: Path, steady_from: float, z0: float, z_upper_tips: float, x50: float,
+                     z_sb: float, w_sb: float) -> dict:
+    """The steady v_φ̃(z) (module docstring): heights [m] above the lower vane tips ``z0``."""
+    from scipy.special import erf
+    prof = pd.read_csv(run_dir / "analysis" / "shearband_profiles.csv")
+    prof = prof[(prof["control"] >= steady_from) & np.isfinite(prof["v"]) & (prof["count"] > 0)]
+    z = prof["z"].to_numpy() - z0
+    v, wgt = prof["v"].to_numpy(), prof["count"].to_numpy(float)
+    gap = z_upper_tips - z0
+    dz = min(2 * x50, gap / 6)                    # 2 x50 bins; at least 6 in a thin cell
+    edges = np.linspace(0.0, gap, max(int(round(gap / dz)), 1) + 1)
+    idx = np.digitize(z, edges) - 1
+    vb = np.array([np.average(v[idx == k], weights=wgt[idx == k]) if (idx == k).any() else np.nan
+                   for k in range(len(edges) - 1)])
+    zc = 0.5 * (edges[1:] + edges[:-1])
+    grad = np.gradient(vb, zc)
+    k = int(np.nanargmax(grad))
+    dv_total = vb[-1] - vb[0]
+    near = np.abs(zc - zc[k]) <= 4 * x50
+    lo, hi = np.flatnonzero(near)[[0, -1]]
+    share = float((vb[hi] - vb[max(lo - 1, 0)]) / dv_total) if dv_total > 0 else float("nan")
+    inside = (z >= 0) & (z <= gap)
+    model = 0.5 + 0.5 * erf((z[inside] - z_sb) / w_sb)
+    rms = float(np.sqrt(np.average((v[inside] - model) ** 2, weights=wgt[inside])))
+    return {"v_profile": (zc, vb), "z_steepest": float(zc[k]), "share_within_8x50": share, "erf_rms": rms,
+            "v_lower_tips": float(vb[0]), "v_upper_tips": float(vb[-1])}
 
 
 def main(argv=None) -> int:
@@ -151,6 +196,16 @@ def main(argv=None) -> int:
             a, b = r.get(f"phi_{zone}_compressed"), r.get(f"phi_{zone}_sheared")
             if a is not None and b is not None:
                 print(f"| {words} | φ {a:.3f} → {b:.3f} (Δφ = {b - a:+.3f}) |")
+        if "z_steepest" in r:
+            zc, vb = r["v_profile"]
+            print(f"| band just above the lower vanes (steady v_φ̃, radii pooled) | steepest at "
+                  f"{r['z_steepest'] / x50:.1f} x50 above the lower vane tips ({(r['tips_gap'] - r['z_steepest']) / x50:.1f}"
+                  f" x50 below the upper tips); {100 * r['share_within_8x50']:.0f} % of the change "
+                  f"{r['v_lower_tips']:.2f} → {r['v_upper_tips']:.2f} between the tips lies within 8 x50 of it "
+                  f"(uniform shear: {100 * min(1.0, 8 * x50 / r['tips_gap']):.0f} %); eq. 2 misses it by "
+                  f"{r['erf_rms']:.3f} rms |")
+            print("| (steady v_φ̃ at heights in x50 above the lower vane tips) | "
+                  + ", ".join(f"{z / x50:.1f}: {v:.2f}" for z, v in zip(zc, vb) if np.isfinite(v)) + " |")
         print(f"| layering near the walls | std of n(r) in the outer 2 x50 / interior: {r['layering']:.2f} |")
         if "n_band_over_rest" in r:
             print(f"| similar number density inside the band | n(band) / n(rest) = {r['n_band_over_rest']:.2f} |")
