@@ -192,8 +192,13 @@ def key_results(run_dir) -> list[KeyResult]:
     wt = (summary.get("wall_time") or {}).get("engine")
     if isinstance(wt, (int, float)):
         est = summary.get("estimated_engine_time_s")
-        rows.append(KeyResult("engine time", float(wt), "s", None, "",
-                              f"estimated {est:.0f} s before the run" if isinstance(est, (int, float)) else ""))
+        note = f"estimated {est:.0f} s before the run" if isinstance(est, (int, float)) else ""
+        resumed = summary.get("resumed_from") or {}
+        if isinstance(resumed, dict) and resumed.get("step") is not None:
+            # the engine time covers only the part after the restart: say so beside both figures
+            note = (f"resumed from step {resumed['step']}: this part only"
+                    + (f"; the whole run was {note}" if note else ""))
+        rows.append(KeyResult("engine time", float(wt), "s", None, "", note))
     return rows
 
 

@@ -54,6 +54,19 @@ def test_shear_cell_key_results_from_the_run_files(tmp_path):
     assert list(df.columns[:2]) == ["quantity", "text"]
 
 
+def test_engine_time_of_a_resumed_run_says_it_covers_only_the_last_part(tmp_path):
+    run = _fake_shear_cell_run(tmp_path)
+    rows = {r.quantity: r for r in key_results(run)}
+    assert rows["engine time"].seed == "estimated 180 s before the run"
+    s = json.loads((run / "summary.json").read_text())
+    s["resumed_from"] = {"step": 235750, "restart_file": "restart/state.235750.restart"}
+    (run / "summary.json").write_text(json.dumps(s))
+    rows = {r.quantity: r for r in key_results(run)}
+    assert rows["engine time"].value == 200.0
+    assert rows["engine time"].seed == ("resumed from step 235750: this part only; the whole run was estimated "
+                                        "180 s before the run")
+
+
 def test_no_band_is_said_not_hidden(tmp_path):
     run = _fake_shear_cell_run(tmp_path)
     (run / "analysis" / "shearband_steady.csv").write_text("r_tilde,z_sb,z_sb_err,w_sb,w_sb_err,n_fits\n")
