@@ -93,6 +93,9 @@ def cmd_convergence(args) -> int:
     if args.csv:
         from ..atomic import write_text
         write_text(args.csv, df.to_csv(index=False))
+        if len(ext):        # the extrapolation beside it: CSV.csv -> CSV-extrapolation.csv
+            csv = Path(args.csv)
+            write_text(csv.with_name(f"{csv.stem}-extrapolation{csv.suffix or '.csv'}"), ext.to_csv(index=False))
     con = _console()
     from rich.markup import escape
     for eng, r in out["recommendation"].items():
@@ -178,7 +181,7 @@ def add_parsers(sub):
     c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
     c.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: clean timings)")
     c.add_argument("--plot", help="plot file (default RUNS/convergence/CASE-KNOB.png)")
-    c.add_argument("--csv", help="also write the table as CSV")
+    c.add_argument("--csv", help="also write the table as CSV (and the extrapolation as CSV-extrapolation.csv)")
     c.set_defaults(func=cmd_convergence)
 
     w = sub.add_parser("sweep", help="run a case over field values (list or --grid), reusing finished runs")

@@ -147,7 +147,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
         r["full_fidelity"] = full_fidelity_setting(ext[ext["engine"] == eng], knob)
     out = {"table": df, "recommendation": rec, "extrapolation": ext}
     if plot:
-        out["plot"] = plot_ladder(df, knob, plot, target_error)
+        out["plot"] = plot_ladder(df, knob, plot, target_error, ext=ext)
     return out
 
 
@@ -217,12 +217,17 @@ def recommend(df, knob: str, target_error: float) -> dict:
     return out
 
 
-def plot_ladder(df, knob: str, path, target_error: float):
+def plot_ladder(df, knob: str, path, target_error: float, ext=None):
+    """Left: error against engine time with the Pareto front. Right (with an extrapolation table):
+    every scalar observable over its extrapolated full-fidelity value against the fidelity distance
+    h, the fitted lines, the full-fidelity point with its 68 % interval and the ± target band."""
     import pandas as pd
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6, 4.5))
+    with_ext = ext is not None and len(ext) > 0
+    fig, axes = plt.subplots(1, 2 if with_ext else 1, figsize=(11.5 if with_ext else 6, 4.5))
+    ax = axes[0] if with_ext else axes
     floor = None
     for eng, g in df.groupby("engine"):
         g = g[~g["reference"]]
@@ -242,5 +247,25 @@ def plot_ladder(df, knob: str, path, target_error: float):
     ax.set_ylabel("largest relative error of the key observables [-]")
     ax.set_title(f"error against run time, knob {knob} (reference = finest)")
     ax.legend(fontsize=8)
+    if with_ext:
+        bx = axes[1]
+        for (eng, obs), e in ext.groupby(["engine", "observable"]):
+            e = e.iloc[0]
+            y_full = e["value_full"]
+            g = df[(df["engine"] == eng) & (df["status"] == "complete")]
+            if not np.isfinite(y_full) or y_full == 0 or obs not in g:
+                continue
+            h = fidelity_distance(knob, g[knob].to_numpy(float))
+            y = pd.to_numeric(g[obs], errors="coerce").to_numpy(float) / y_full
+            line = bx.plot(h, y, "o", label=f"{eng}: {obs}")[0]
+            hh = np.linspace(min(e["h_full"], h.min()), h.max(), 50)
+            bx.plot(hh, 1 + e["slope"] * (hh - e["h_full"]) / y_full, "-", color=line.get_color(), alpha=0.6)
+            if np.isfinite(e["sem_full"]):
+                bx.errorbar([e["h_full"]], [1.0], yerr=[abs(e["sem_full"] / y_full)], fmt="s", color=line.get_color())
+        bx.axhspan(1 - target_error, 1 + target_error, color="grey", alpha=0.15, label=f"± {target_error:g}")
+        bx.set_xlabel(f"fidelity distance h({knob}) [-] (0: ideal limit)")
+        bx.set_ylabel("observable / extrapolated full-fidelity value [-]")
+        bx.set_title("extrapolation to full fidelity (square: ±68 % interval)")
+        bx.legend(fontsize=7)
     fig.tight_layout()
     return save_figure(fig, path)
