@@ -44,8 +44,13 @@ def fidelity_distance(knob: str, value) -> np.ndarray:
     """h(value) [-] of the module docstring, element-wise. None stands for the ideal limit, h = 0
     (dt → 0, quasi-static, rigid grains, an infinite system)."""
     p = _EXPONENT.get(knob, 1.0)
-    return np.asarray([0.0 if x is None else abs(float(x)) ** p for x in np.atleast_1d(np.asarray(value, object))],
-                      float)
+
+    def h(x):
+        if x is None:
+            return 0.0
+        v = abs(float(x))
+        return math.inf if (v == 0 and p < 0) else v ** p     # zero stiffness or grains: infinitely far
+    return np.asarray([h(x) for x in np.atleast_1d(np.asarray(value, object))], float)
 
 
 def knob_value(knob: str, h: float) -> float:
