@@ -100,6 +100,9 @@ def extrapolate(knob: str, values, y, y_sem=None, full=None, tolerance: float = 
     if ok.sum() < 2 or np.ptp(h) == 0:
         out["note"] = "fewer than two rungs with a value: nothing to extrapolate"
         return out
+    if not np.isfinite(h_full):
+        out["note"] = f"full = {full} is infinitely far from the ideal limit of {knob}: nothing to extrapolate to"
+        return out
     n = len(h)
     known = np.isfinite(ss) & (ss > 0)
     w = np.where(known, 1.0 / np.where(known, ss, 1.0) ** 2, np.nan)
