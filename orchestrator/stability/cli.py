@@ -75,15 +75,16 @@ def cmd_convergence(args) -> int:
                  engines=None if args.engine == "all" else [args.engine], runs_root=args.runs,
                  reference=args.reference, target_error=args.target_error, scheduler=args.scheduler,
                  workers=args.workers, plot=args.plot or Path(args.runs) / "convergence" /
-                 f"{Path(args.case).stem}-{args.knob}.png", full=args.full)
+                 f"{Path(args.case).stem}-{args.knob}.png", full=args.full, seeds=args.seeds)
     df = out["table"]
-    cols = ["engine", args.knob, "status", "engine_time_s", "error"] + [c for c in df.columns if c.startswith("err_")]
+    cols = ["engine", args.knob] + (["seed"] if args.seeds else []) + ["status", "engine_time_s", "error"] \
+        + [c for c in df.columns if c.startswith("err_")]
     show = df[cols].rename(columns=lambda c: c.replace("err_", "e:"))
     _print_df(show, f"Error against run time: {args.case}, knob {args.knob} (e: relative errors)")
-    obs = [c for c in df.columns if c not in cols and c not in ("total_time_s", "reference", "run_id")
+    obs = [c for c in df.columns if c not in cols and c not in ("total_time_s", "reference", "run_id", "seed")
            and not c.startswith("err_") and not c.endswith("_sem")]
     if obs:
-        _print_df(df[["engine", args.knob] + obs], "observables")
+        _print_df(df[["engine", args.knob] + (["seed"] if args.seeds else []) + obs], "observables")
     ext = out["extrapolation"]
     if len(ext):
         full = "the ideal limit" if args.full is None else f"{args.knob} = {args.full}"
@@ -176,6 +177,9 @@ def add_parsers(sub):
     c.add_argument("--full", type=float, help="the knob's full-fidelity value to extrapolate to, e.g. the seed's "
                                               "stiffness as a multiple of the case's (default: the ideal limit: "
                                               "dt -> 0, quasi-static, rigid, infinite system)")
+    c.add_argument("--seeds", type=int, nargs="+", help="run every rung on each of these packings (the case's "
+                                                        "seed): each rung's mean and run-to-run standard error "
+                                                        "enter the extrapolation")
     c.add_argument("--engine", choices=[*engine_names(), "all"], default="all")
     c.add_argument("--runs", default="runs")
     c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")

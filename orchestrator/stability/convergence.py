@@ -80,10 +80,14 @@ def pareto(times, errors) -> list[int]:
 
 def ladder(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
            reference=None, target_error: float = 0.05, scheduler=None, workers: int | None = 1,
-           observables_used: list[str] | None = None, plot: str | Path | None = None, full=None) -> dict:
+           observables_used: list[str] | None = None, plot: str | Path | None = None, full=None,
+           seeds: list[int] | None = None) -> dict:
     """Run the ladder and compare; returns {"table": DataFrame, "recommendation": {...},
     "extrapolation": DataFrame, "plot": path}. ``full``: the knob's full-fidelity value for the
-    extrapolation (:mod:`.extrapolation`; None: the ideal limit)."""
+    extrapolation (:mod:`.extrapolation`; None: the ideal limit). ``seeds``: run every rung on each
+    of these packings (the case's ``seed``), so that each rung's mean carries its run-to-run
+    standard error into the extrapolation; each run is compared with the reference rung's run of
+    the same seed."""
     import pandas as pd
     case0 = load_case(case_path)
     engines = engines or case0.engines
@@ -92,17 +96,19 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     try:
         for eng in engines:
             tasks = []
-            for v in values:
+            for v, seed in [(v, sd) for v in values for sd in (seeds or [None])]:
                 ov = knob_overrides(case_path, knob, v)
+                if seed is not None:
+                    ov = dict(ov, seed=int(seed))
                 try:
                     c = load_case(case_path, overrides=ov)
                 except CaseError as exc:             # e.g. a dt the pre-run check refuses: a row, not a crash
                     tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "point": {knob: v},
-                                  "run_dir": None, "run_id": None, "refused": str(exc)})
+                                  "run_dir": None, "run_id": None, "refused": str(exc), "value": v, "seed": seed})
                     continue
                 rd = run_dir_for(c, eng, runs_root)
                 tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
-                              "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name})
+                              "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name, "value": v, "seed": seed})
             results = [None] * len(tasks)
             todo = []
             for k, t in enumerate(tasks):
@@ -115,24 +121,28 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                     results[k] = _finished(t)
                 else:
                     todo.append(k)
-            for j, res in ex.run(run_task, [tasks[k] for k in todo]):
+            for j, res in ex.run(run_task, [{kk: vv for kk, vv in tasks[k].items() if kk not in ("value", "seed")}
+                                            for k in todo]):
                 results[todo[j]] = res
-            ref_k = len(values) - 1 if reference is None else [str(v) for v in values].index(str(reference))
-            ref_obs = (results[ref_k] or {}).get("observables") or {}
-            keys = [k for k, v in ref_obs.items() if not k.endswith(("_sem", "_std", "_error"))
-                    and (observables_used is None or k in observables_used)]
+            ref_v = values[-1] if reference is None else values[[str(v) for v in values].index(str(reference))]
+            # the reference rung's run of each seed (the ladder's one run without seeds)
+            ref_of = {t["seed"]: k for k, t in enumerate(tasks) if str(t["value"]) == str(ref_v)}
+            ref_obs_of = {sd: (results[k] or {}).get("observables") or {} for sd, k in ref_of.items()}
+            keys = sorted({k for o in ref_obs_of.values() for k in o if not k.endswith(("_sem", "_std", "_error"))
+                           and (observables_used is None or k in observables_used)})
             for k, (t, r) in enumerate(zip(tasks, results)):
                 obs = r.get("observables") or {}
-                row = {"engine": eng, knob: values[k], "status": r.get("status"),
+                ref_obs = ref_obs_of.get(t["seed"], {})
+                row = {"engine": eng, knob: t["value"], "seed": t["seed"], "status": r.get("status"),
                        "engine_time_s": r.get("engine_time"), "total_time_s": r.get("total_time"),
-                       "reference": k == ref_k, "run_id": t["run_id"]}
+                       "reference": k == ref_of.get(t["seed"]), "run_id": t["run_id"]}
                 errs = []
                 for key in keys:
                     v = obs.get(key)
                     if not isinstance(v, list):
                         row[key] = v
                         row[f"{key}_sem"] = obs.get(f"{key}_sem")
-                    e = relative_error(v, ref_obs[key]) if v is not None else float("nan")
+                    e = relative_error(v, ref_obs.get(key)) if v is not None else float("nan")
                     row[f"err_{key}"] = e
                     if np.isfinite(e):
                         errs.append(e)
@@ -157,18 +167,38 @@ def extrapolations(df, knob: str, full=None, tolerance: float = 0.05):
     complete rungs."""
     import pandas as pd
     rows = []
-    skip = {"engine", knob, "status", "engine_time_s", "total_time_s", "reference", "run_id", "error"}
+    skip = {"engine", knob, "seed", "status", "engine_time_s", "total_time_s", "reference", "run_id", "error"}
     for eng, g in df.groupby("engine"):
         g = g[g["status"] == "complete"]
         for key in [c for c in g.columns if c not in skip and not c.startswith("err_") and not c.endswith("_sem")]:
-            y = pd.to_numeric(g[key], errors="coerce").to_numpy(float)
-            sem = pd.to_numeric(g[f"{key}_sem"], errors="coerce").to_numpy(float) if f"{key}_sem" in g else None
-            r = extrapolate(knob, g[knob].to_numpy(float), y, y_sem=sem, full=full, tolerance=tolerance,
-                            times=pd.to_numeric(g["engine_time_s"], errors="coerce").to_numpy(float))
+            vals, y, sem, times = rung_means(g, knob, key)
+            r = extrapolate(knob, vals, y, y_sem=sem, full=full, tolerance=tolerance, times=times)
             if r["rungs"] >= 2:
                 rows.append({"engine": eng, "observable": key, **r})
     return pd.DataFrame(rows, columns=["engine", "observable", "rungs", "h_full", "value_full", "sem_full", "slope",
                                        "cheapest", "cheapest_time_s", "where", "note"])
+
+
+def rung_means(g, knob: str, key: str):
+    """(values, mean, standard error, mean engine time) of observable ``key`` per rung of one
+    engine's complete runs: over the rung's seeds where it has several (sem = std/√n), else the
+    run's own ``KEY_sem`` where it reports one."""
+    import pandas as pd
+    vals, ys, sems, ts = [], [], [], []
+    for v, r in g.groupby(knob, sort=False):
+        y = pd.to_numeric(r[key], errors="coerce").to_numpy(float)
+        y = y[np.isfinite(y)]
+        if not y.size:
+            continue
+        vals.append(float(v))
+        ys.append(float(y.mean()))
+        if y.size > 1:
+            sems.append(float(y.std(ddof=1) / math.sqrt(y.size)))
+        else:
+            own = pd.to_numeric(r.get(f"{key}_sem", pd.Series([np.nan])), errors="coerce").to_numpy(float)
+            sems.append(float(own[0]) if own.size else float("nan"))
+        ts.append(float(pd.to_numeric(r["engine_time_s"], errors="coerce").mean()))
+    return np.array(vals), np.array(ys), np.array(sems), np.array(ts)
 
 
 def full_fidelity_setting(ext, knob: str) -> dict:

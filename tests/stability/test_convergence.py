@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.stability.convergence import ladder, pareto, relative_error
+from orchestrator.stability.convergence import extrapolations, ladder, pareto, relative_error, rung_means
 from orchestrator.stability.extrapolation import extrapolate, fidelity_distance, knob_value
 
 CASE = Path(__file__).resolve().parents[2] / "cases" / "stability" / "mu1.yaml"
@@ -54,6 +54,41 @@ def test_extrapolation_uncertainty_covers_the_truth_at_its_stated_rate():
             r = extrapolate("rate_scale", v, y, y_sem=[0.004] * v.size if sems else None)
             hits += abs(r["value_full"] - 0.55) <= r["sem_full"]
         assert 0.60 <= hits / 400 <= 0.90, (sems, hits)
+
+
+def test_seeds_give_each_rung_its_mean_and_run_to_run_error():
+    import pandas as pd
+    # two seeds per rung: y = 0.5 + 0.1 h +- 0.01 (seed 1 high, seed 2 low)
+    rows = [{"engine": "liggghts", "rate_scale": v, "seed": sd, "status": "complete", "engine_time_s": 100 / v,
+             "mu_macro": 0.5 + 0.1 * v + (0.01 if sd == 1 else -0.01), "mu_macro_sem": None}
+            for v in (2.0, 1.0, 0.5) for sd in (1, 2)]
+    df = pd.DataFrame(rows)
+    vals, y, sem, t = rung_means(df, "rate_scale", "mu_macro")
+    assert vals.tolist() == [2.0, 1.0, 0.5]
+    # std of (+0.01, -0.01) is 0.02/sqrt(2), its standard error over two seeds 0.01
+    assert np.allclose(y, [0.7, 0.6, 0.55]) and np.allclose(sem, 0.01) and np.allclose(t, [50, 100, 200])
+    ext = extrapolations(df, "rate_scale")
+    row = ext[ext["observable"] == "mu_macro"].iloc[0]
+    # the means lie on the line: the interval is the seeds' standard error propagated to h = 0
+    assert row["rungs"] == 3 and row["value_full"] == pytest.approx(0.5)
+    h = np.array([2.0, 1.0, 0.5])
+    A = np.column_stack([np.ones(3), h])
+    cov = np.linalg.inv(A.T @ A) * 0.01 ** 2
+    assert row["sem_full"] == pytest.approx(np.sqrt(cov[0, 0]))
+
+
+@pytest.mark.engine
+def test_ladder_runs_every_rung_on_each_seed(runs_root, tmp_path, engines_installed):
+    out = ladder(CASE, "dt_fraction", [0.4, 0.2], engines=["liggghts"], runs_root=runs_root, seeds=[1, 2],
+                 target_error=0.2, plot=tmp_path / "ladder.png")
+    df = out["table"]
+    assert len(df) == 4 and (df["status"] == "complete").all()
+    assert sorted(zip(df["dt_fraction"], df["seed"])) == [(0.2, 1), (0.2, 2), (0.4, 1), (0.4, 2)]
+    # each seed is compared with the reference rung's run of the same seed
+    assert df.loc[df["reference"], "seed"].tolist() == [1, 2] and (df.loc[df["reference"], "error"] == 0).all()
+    assert len(set(df["run_id"])) == 4          # four packings and time steps, four runs
+    mu = out["extrapolation"].query("observable == 'mu_macro'").iloc[0]
+    assert mu["rungs"] == 2 and np.isfinite(mu["sem_full"])     # two rungs, but their seeds' errors
 
 
 @pytest.mark.engine
