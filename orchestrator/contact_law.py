@@ -146,6 +146,18 @@ def wall_dashpot_coefficient(E_eff: float, R_eff: float, m_eff: float, force: fl
     return 2 * math.sqrt(5 / 6) * abs(tsuji_beta(restitution)) * math.sqrt(2 * E_eff * math.sqrt(R_eff * xi) * m_eff)
 
 
+#: largest loop gain G = v_max k_p γ/F_c of a proportional force servo against the dashpots of the
+#: contacts it pushes (scenes/shear_cell.py servo_dashpot_gain: above 1 the error alternates every
+#: step and never decays; the medium shear cell at G = 2.66 held 1.22 x its target force)
+SERVO_DASHPOT_GAIN = 0.7
+
+
+def dashpot_stable_servo_speed(v_max: float, gain: float) -> float:
+    """The servo speed limit [m/s] ``v_max`` capped so that its dashpot loop gain ``gain`` (at
+    ``v_max``; G ∝ v) stays at :data:`SERVO_DASHPOT_GAIN`."""
+    return v_max if gain <= SERVO_DASHPOT_GAIN else v_max * SERVO_DASHPOT_GAIN / gain
+
+
 def damping_ratio(e: float) -> float:
     """Damping ratio ζ of a linear oscillator whose restitution is e: -ln e/√(π² + ln² e)."""
     return -tsuji_beta(e)

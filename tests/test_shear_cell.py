@@ -15,7 +15,8 @@ from orchestrator.case import load_case
 from orchestrator.derive import derive
 from orchestrator.geometry import Mesh, MeshError, box, check_manifold, cylinder_shell, read_stl, vaned_piston
 from orchestrator.psd import lognormal_diameters, max_overlap, pack_cylinder
-from orchestrator.scenes.shear_cell import SERVO_DASHPOT_GAIN, geometry_numbers, servo_dashpot_gain
+from orchestrator.contact_law import SERVO_DASHPOT_GAIN
+from orchestrator.scenes.shear_cell import geometry_numbers, servo_dashpot_gain
 from orchestrator.scenes import shear_cell
 from shear_cell_protocol import check_smoke_protocol
 

@@ -35,7 +35,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ..case import Strict, positive
-from ..contact_law import effective_modulus, wall_dashpot_coefficient
+from ..contact_law import dashpot_stable_servo_speed, effective_modulus, wall_dashpot_coefficient
 from ..numerics import multiple_of
 from ..derive import adhesion_force, DerivationError
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
@@ -43,7 +43,7 @@ from ..particles_io import ensure_particle_table
 from ..psd import lognormal_diameters, mean_sphere_volume, pack_box
 from ..units import Pressure
 from . import base
-from .shear_cell import PSD, SERVO_DASHPOT_GAIN
+from .shear_cell import PSD
 
 STAGES = {"initial": 0, "compressed": 1, "shear": 2}
 
@@ -145,13 +145,12 @@ def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
 
 def _speeds(case, g=None) -> tuple[float, float]:
     """(servo speed limit, shear speed) [m/s] from the inertial numbers; the servo's capped so that
-    its loop gain against the contacts' dashpots stays at SERVO_DASHPOT_GAIN (as the shear cell's)."""
+    its loop gain against the contacts' dashpots stays at contact_law.SERVO_DASHPOT_GAIN (as the shear cell's)."""
     s = case.scene
     g = g or geometry(case)
     T = _time_scale(case)
     v = s.compression_inertial_number * g["H_dense"] / T
-    G = servo_dashpot_gain(case, v, s.servo_gain)
-    return (v if G <= SERVO_DASHPOT_GAIN else v * SERVO_DASHPOT_GAIN / G), s.inertial_number * g["H_dense"] / T
+    return dashpot_stable_servo_speed(v, servo_dashpot_gain(case, v, s.servo_gain)), s.inertial_number * g["H_dense"] / T
 
 
 def max_velocity(case) -> float:

@@ -38,7 +38,8 @@ from pydantic import Field, field_validator, model_validator
 
 from ..atomic import write_json
 from ..case import Strict, positive
-from ..contact_law import effective_modulus, remembered, wall_dashpot_coefficient
+from ..contact_law import (dashpot_stable_servo_speed, effective_modulus, remembered,
+                           wall_dashpot_coefficient)
 from ..derive import adhesion_force, DerivationError
 from ..numerics import multiple_of
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
@@ -219,9 +220,6 @@ def _omega(case) -> float:
     return s.quasi_static_number / math.sqrt(rho * s.psd.median ** 2 / s.normal_stress)
 
 
-#: largest loop gain of the piston servo against its contacts' dashpots (:func:`servo_dashpot_gain`)
-SERVO_DASHPOT_GAIN = 0.7
-
 
 def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
     """Loop gain G = v_max kp γ_w / F_c [-] of the force servo against the dashpots of the grains
@@ -249,15 +247,14 @@ def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
 def _v_max(case, g=None) -> float:
     """Servo speed limit [m/s]: from the compression inertial number I_c = (v_max/h) x50 √(ρ/σ),
     capped so that the servo's loop gain against its contacts' dashpots stays at
-    :data:`SERVO_DASHPOT_GAIN` (:func:`servo_dashpot_gain`; the cap binds on tall cells, whose
+    :data:`..contact_law.SERVO_DASHPOT_GAIN` (:func:`servo_dashpot_gain`; the cap binds on tall cells, whose
     I_c-speed is high)."""
     s = case.scene
     g = g or geometry_numbers(case)
     rho = case.material.density
     rate = s.compression_inertial_number / (s.psd.median * math.sqrt(rho / s.normal_stress))
     v = rate * g["h_dense_estimate"]
-    G = servo_dashpot_gain(case, v, s.servo_gain)
-    return v if G <= SERVO_DASHPOT_GAIN else v * SERVO_DASHPOT_GAIN / G
+    return dashpot_stable_servo_speed(v, servo_dashpot_gain(case, v, s.servo_gain))
 
 
 def max_velocity(case) -> float:
