@@ -104,11 +104,11 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                     c = load_case(case_path, overrides=ov)
                 except CaseError as exc:             # e.g. a dt the pre-run check refuses: a row, not a crash
                     tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "point": {knob: v},
-                                  "run_dir": None, "run_id": None, "refused": str(exc), "value": v, "seed": seed})
+                                  "run_dir": None, "run_id": None, "refused": str(exc), "seed": seed})
                     continue
                 rd = run_dir_for(c, eng, runs_root)
                 tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
-                              "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name, "value": v, "seed": seed})
+                              "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name, "seed": seed})
             results = [None] * len(tasks)
             todo = []
             for k, t in enumerate(tasks):
@@ -121,19 +121,18 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                     results[k] = _finished(t)
                 else:
                     todo.append(k)
-            for j, res in ex.run(run_task, [{kk: vv for kk, vv in tasks[k].items() if kk not in ("value", "seed")}
-                                            for k in todo]):
+            for j, res in ex.run(run_task, [{kk: vv for kk, vv in tasks[k].items() if kk != "seed"} for k in todo]):
                 results[todo[j]] = res
             ref_v = values[-1] if reference is None else values[[str(v) for v in values].index(str(reference))]
             # the reference rung's run of each seed (the ladder's one run without seeds)
-            ref_of = {t["seed"]: k for k, t in enumerate(tasks) if str(t["value"]) == str(ref_v)}
+            ref_of = {t["seed"]: k for k, t in enumerate(tasks) if str(t["point"][knob]) == str(ref_v)}
             ref_obs_of = {sd: (results[k] or {}).get("observables") or {} for sd, k in ref_of.items()}
             keys = sorted({k for o in ref_obs_of.values() for k in o if not k.endswith(("_sem", "_std", "_error"))
                            and (observables_used is None or k in observables_used)})
             for k, (t, r) in enumerate(zip(tasks, results)):
                 obs = r.get("observables") or {}
                 ref_obs = ref_obs_of.get(t["seed"], {})
-                row = {"engine": eng, knob: t["value"], "seed": t["seed"], "status": r.get("status"),
+                row = {"engine": eng, knob: t["point"][knob], "seed": t["seed"], "status": r.get("status"),
                        "engine_time_s": r.get("engine_time"), "total_time_s": r.get("total_time"),
                        "reference": k == ref_of.get(t["seed"]), "run_id": t["run_id"]}
                 errs = []
