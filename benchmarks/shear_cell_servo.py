@@ -17,7 +17,6 @@ force and position printed every step (in a temporary directory; the run is not 
 """
 from __future__ import annotations
 
-import glob
 import json
 import math
 import shutil
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from engines.liggghts.segments import wall_rows
 from orchestrator.case import load_case
 from orchestrator.derive import derive
 from orchestrator.scenes import plane_shear, shear_cell
@@ -57,8 +57,7 @@ def series(run: Path) -> None:
     sc = json.loads((run / "params.json").read_text())["scene"]
     Ft = sc["servo"]["target_force"]
     a, b = sc["stages"]["compress"]
-    rows = [np.loadtxt(f, comments="#", ndmin=2) for f in sorted(glob.glob(str(run / "walls.*.txt")))]
-    w = np.vstack([r for r in rows if r.size])
+    w = wall_rows(run)           # the adapter's reader of the wall series (every segment's file)
     w = w[np.argsort(w[:, 0], kind="stable")]
     step, ratio = w[:, 0], np.abs(w[:, 4]) / Ft
     print(f"{run.name}: compression steps {a}-{b}, wall series to step {int(step[-1])}")
