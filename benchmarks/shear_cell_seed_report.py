@@ -36,8 +36,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.special import erf
 
-from orchestrator.analysis import density_profile
+from orchestrator.analysis import density_profile, parse_specs
 from orchestrator.case import load_case
 from orchestrator.frames import Frames
 
@@ -58,7 +59,8 @@ def report(run_dir: Path) -> dict:
     fr = Frames(run_dir)
     params = json.loads((run_dir / "params.json").read_text())
     case = json.loads((run_dir / "summary.json").read_text())
-    vane_height = load_case(run_dir / "case.yaml").scene.vane_height      # the run's resolved case [m]
+    run_case = load_case(run_dir / "case.yaml")                          # the run's resolved case
+    vane_height = run_case.scene.vane_height                             # [m]
     x50 = params["scene"]["psd"]["median"]
     g = params["scene"]["geometry"]
     steady = pd.read_csv(run_dir / "analysis" / "shearband_steady.csv")
@@ -115,15 +117,13 @@ def report(run_dir: Path) -> dict:
         hr = (z_upper_tips - z0_last) - hb
         out["n_band_over_rest"] = float((band.sum() / hb) / max(rest.sum() / hr, 1e-30)) if hr > 0 else float("nan")
     if "z_sb" in out:
-        out.update(velocity_profile(run_dir, case_steady_from(run_dir), z0_last, z_upper_tips, x50,
+        out.update(velocity_profile(run_dir, case_steady_from(run_case), z0_last, z_upper_tips, x50,
                                     out["z_sb"], out["w_sb"]))
     return out
 
 
-def case_steady_from(run_dir: Path) -> float:
+def case_steady_from(case) -> float:
     """The steady window's start [rad] of the run's shearband analysis (seed 000: 10°)."""
-    from orchestrator.analysis import parse_specs
-    case = load_case(run_dir / "case.yaml")
     opts = next((o for n, o in parse_specs(case.analysis) if n == "shearband"), {})
     return float(opts.get("steady_from", np.radians(10.0)))
 
@@ -131,7 +131,6 @@ def case_steady_from(run_dir: Path) -> float:
 def velocity_profile(run_dir: Path, steady_from: float, z0: float, z_upper_tips: float, x50: float,
                      z_sb: float, w_sb: float) -> dict:
     """The steady v_φ̃(z) (module docstring): heights [m] above the lower vane tips ``z0``."""
-    from scipy.special import erf
     prof = pd.read_csv(run_dir / "analysis" / "shearband_profiles.csv")
     prof = prof[(prof["control"] >= steady_from) & np.isfinite(prof["v"]) & (prof["count"] > 0)]
     z = prof["z"].to_numpy() - z0
