@@ -78,21 +78,6 @@ def test_seeds_give_each_rung_its_mean_and_run_to_run_error():
 
 
 @pytest.mark.engine
-def test_ladder_runs_every_rung_on_each_seed(runs_root, tmp_path, engines_installed):
-    # seed 7 is the case's own: those two runs are test_dt_ladder's when they share a worker
-    out = ladder(CASE, "dt_fraction", [0.4, 0.2], engines=["liggghts"], runs_root=runs_root, seeds=[7, 8],
-                 target_error=0.2, plot=tmp_path / "ladder.png")
-    df = out["table"]
-    assert len(df) == 4 and (df["status"] == "complete").all()
-    assert sorted(zip(df["dt_fraction"], df["seed"])) == [(0.2, 7), (0.2, 8), (0.4, 7), (0.4, 8)]
-    # each seed is compared with the reference rung's run of the same seed
-    assert df.loc[df["reference"], "seed"].tolist() == [7, 8] and (df.loc[df["reference"], "error"] == 0).all()
-    assert len(set(df["run_id"])) == 4          # four packings and time steps, four runs
-    mu = out["extrapolation"].query("observable == 'mu_macro'").iloc[0]
-    assert mu["rungs"] == 2 and np.isfinite(mu["sem_full"])     # two rungs, but their seeds' errors
-
-
-@pytest.mark.engine
 def test_dt_ladder(runs_root, tmp_path, engines_installed):
     # rungs below the pre-run check's safe limit for this case (0.48 of the critical step, coordination)
     out = ladder(CASE, "dt_fraction", [0.4, 0.2, 0.1], engines=["liggghts"], runs_root=runs_root,
@@ -114,6 +99,17 @@ def test_dt_ladder(runs_root, tmp_path, engines_installed):
     assert rec["dt_fraction"] in (0.4, 0.2, 0.1)
     if "note" not in rec:
         assert rec["error"] <= 0.2
+    # every rung on each seed: seed 7 is the case's own, so two of these four runs are the ones above
+    out = ladder(CASE, "dt_fraction", [0.4, 0.2], engines=["liggghts"], runs_root=runs_root, seeds=[7, 8],
+                 target_error=0.2, plot=tmp_path / "ladder_seeds.png")
+    df = out["table"]
+    assert len(df) == 4 and (df["status"] == "complete").all()
+    assert sorted(zip(df["dt_fraction"], df["seed"])) == [(0.2, 7), (0.2, 8), (0.4, 7), (0.4, 8)]
+    # each seed is compared with the reference rung's run of the same seed
+    assert df.loc[df["reference"], "seed"].tolist() == [7, 8] and (df.loc[df["reference"], "error"] == 0).all()
+    assert len(set(df["run_id"])) == 4          # four packings and time steps, four runs
+    mu = out["extrapolation"].query("observable == 'mu_macro'").iloc[0]
+    assert mu["rungs"] == 2 and np.isfinite(mu["sem_full"])     # two rungs, but their seeds' errors
 
 
 def test_refused_rung_is_a_row(runs_root):
