@@ -3,8 +3,9 @@
     .venv/bin/python benchmarks/bench_estimate.py [RUNS_TREE ...] [--run CASE ...] [--engine E ...]
 
 With ``--run``, the named cases are first run (or reused) under ``benchmarks/runs-estimate/``.
-For every complete, un-resumed run it prints the engine time the model predicts
-(:mod:`orchestrator.clock`) in two ways:
+For every complete, un-resumed run it prints the engine time the model predicts before the run
+(:mod:`orchestrator.clock`; for a triaxial, whose stage 1 goes on until it converges, from the
+stage-1 chunks the engine's other runs took, not from the chunks this run took) in two ways:
 
 - ``table``: with the shipped/user table as it is (what ``validate`` and ``run --dry-run`` print);
 - ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
@@ -19,7 +20,7 @@ import math
 from pathlib import Path
 
 from orchestrator.case import load_case
-from orchestrator.clock import estimate_engine_time, fit, load_table, samples_from_runs
+from orchestrator.clock import estimate_engine_time, expected_steps, fit, load_table, samples_from_runs
 from orchestrator.runner import run_case
 
 HERE = Path(__file__).resolve().parent
@@ -46,9 +47,13 @@ def main(argv=None) -> int:
           f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s}  run")
     worst = None
     for s in samples:
-        est, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, s.steps, s.ranks, table=table)
+        # what `run --dry-run` printed before the run: the step budget, or where the scene decides its
+        # step count while it runs (triaxial stage 1), the steps the engine's measured runs took
+        budget = s.plan.steps(s.plan.max_units) if s.plan is not None else s.steps
+        est, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=table, plan=s.plan)
         others = [o for o in samples if (o.engine, o.scene) == (s.engine, s.scene) and o.source != s.source]
-        loo = fit(others).engine_time(s.n_particles, s.steps, s.ranks) if others else math.nan
+        tp = fit(others) if others else None
+        loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
         if r2 == r2:

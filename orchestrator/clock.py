@@ -17,6 +17,11 @@ Model (per engine and scene, fitted from completed runs)::
   with parallel efficiency ``e`` fitted from runs on more than one rank (0.7 until measured, stated
   as ``assumed``).
 
+Where a scene decides its step count while it runs (:meth:`orchestrator.scenes.base.Scene.step_plan`:
+the triaxial's stage 1 goes on chunk by chunk until the stresses converge), ``steps`` is not the
+derived budget (every chunk allowed) but ``fixed + unit · u`` with ``u`` the median number of units
+the engine's measured runs of the scene took (``units`` in the table; the budget until measured).
+
 ``a`` and ``b`` come from a non-negative least-squares fit of the loop time per step against n
 over the stored runs of one engine and scene (scipy.optimize.nnls). One run fixes only the sum:
 then ``a = 0`` and the fit is flagged ``one size``.
@@ -41,7 +46,8 @@ from .atomic import write_text
 
 from .resources import data_file
 
-__all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "samples_from_runs", "fit",
+__all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "expected_steps", "step_plan",
+           "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
@@ -57,6 +63,8 @@ class Throughput:
     parallel_efficiency: float = ASSUMED_PARALLEL_EFFICIENCY
     runs: int = 0
     note: str = ""
+    #: median units (StepPlan) the runs took, e.g. stage-1 chunks of a triaxial [-]; None: not measured
+    units: float | None = None
 
     def engine_time(self, n_particles: int, steps: int, ranks: int = 1) -> float:
         """Predicted engine wall time [s] of ``steps`` steps with ``n_particles`` on ``ranks``."""
@@ -75,6 +83,17 @@ class RunSample:
     engine_s: float
     loop_s: float
     source: str = field(default="", compare=False)
+    #: the run's StepPlan (scenes whose step count is decided while they run), None otherwise
+    plan: object = field(default=None, compare=False)
+
+    @property
+    def units(self) -> float | None:
+        """Units (StepPlan) this run took [-]; None without a plan, or when the run did not follow it
+        (e.g. a triaxial whose stage 1 ran out of chunks and skipped the drag ramp)."""
+        if self.plan is None:
+            return None
+        u = self.plan.units_of(self.steps)
+        return u if 0.5 <= u <= self.plan.max_units + 0.5 else None
 
 
 def package_table_path() -> Path:
@@ -112,14 +131,17 @@ def load_table() -> dict:
 
 
 def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, ranks: int = 1,
-                         table: dict | None = None) -> tuple[float, str]:
-    """(engine wall time [s], basis) for one run. ``basis`` says where the figures came from:
-    the fitted (engine, scene) entry, or the engine's entry of another scene, or nothing."""
+                         table: dict | None = None, plan=None) -> tuple[float, str]:
+    """(engine wall time [s], basis) for one run of at most ``steps`` steps. ``basis`` says where the
+    figures came from: the fitted (engine, scene) entry, or the engine's entry of another scene, or
+    nothing. With the scene's ``plan`` (:func:`step_plan`) the steps are those the measured runs
+    took (:func:`expected_steps`)."""
     table = load_table() if table is None else table
     scenes = table.get(engine, {})
     if scene in scenes:
         tp = scenes[scene]
-        return tp.engine_time(n_particles, steps, ranks), f"measured on {tp.runs} {engine} {scene} run(s)"
+        return (tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
+                f"measured on {tp.runs} {engine} {scene} run(s)")
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.per_particle_step_s + t.per_step_s / max(n_particles, 1))
         return tp.engine_time(n_particles, steps, ranks), f"no {scene} run measured on {engine}: slowest other scene"
@@ -151,6 +173,7 @@ def _sample(run_dir: Path) -> RunSample | None:
     if not kind and isinstance(s.get("scene"), str):
         kind = s["scene"]
     ranks = max(int(s.get("workers") or 1), 1)
+    plan = step_plan(kind, sc)
     engine_s = float(wt["engine"])
     # the engine's own loop time where its log gives one (0 or absent: not measured, e.g. YADE's)
     loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
@@ -165,7 +188,25 @@ def _sample(run_dir: Path) -> RunSample | None:
         startup = max(engine_s - loop, 0.0)
         engine_s = min(float(cpu) / ranks, engine_s)
         loop = engine_s - startup if startup < engine_s else engine_s
-    return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir))
+    return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir), plan)
+
+
+def step_plan(kind: str, scene_params: dict):
+    """The scene's :class:`~orchestrator.scenes.base.StepPlan` for these numbers, or None (fixed
+    step count, unknown scene, numbers of an older version)."""
+    from .registry import get_scene      # the scenes import the case models: not needed to read the table
+    try:
+        return get_scene(kind).step_plan(scene_params)
+    except Exception:                    # noqa: BLE001 - an unknown kind or old params: no plan
+        return None
+
+
+def expected_steps(budget: int, plan, tp: Throughput | None) -> int:
+    """Steps a run is expected to take [-]: the derived ``budget`` for a fixed step count, else the
+    plan's fixed part plus the units the engine's measured runs took (the budget until measured)."""
+    if plan is None or tp is None or tp.units is None:
+        return int(budget)
+    return min(int(budget), plan.steps(tp.units))
 
 
 def samples_from_runs(paths) -> list[RunSample]:
@@ -216,7 +257,11 @@ def fit(samples: list[RunSample]) -> Throughput:
         note += f"; parallel efficiency from {len(multi)} run(s)"
     else:
         note += "; parallel efficiency assumed" + ("" if single else " (no one-rank run)")
-    return Throughput(startup, float(a), float(b), eff, len(samples), note)
+    units = [s.units for s in samples if s.units is not None]
+    med_units = float(np.median(units)) if units else None
+    if units:
+        note += f"; {med_units:g} units (median of {len(units)})"
+    return Throughput(startup, float(a), float(b), eff, len(samples), note, med_units)
 
 
 def refresh(paths, out: Path | None = None) -> dict:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 
-from .clock import estimate_engine_time
+from .clock import estimate_engine_time, expected_steps, load_table, step_plan
 from .registry import get_engine
 
 #: the orchestrator's packing and particle table [bytes per particle]
@@ -54,7 +54,8 @@ def integrated_particles(params: dict) -> int:
 
 
 def estimate(case, params: dict, engine: str) -> dict:
-    """Size of one run: ``particles``, ``steps``, ``frames``, ``memory_bytes`` (the larger of the
+    """Size of one run: ``particles``, ``steps`` (the budget), ``steps_expected`` (what the engine's
+    measured runs of the scene took, :func:`orchestrator.clock.expected_steps`), ``frames``, ``memory_bytes`` (the larger of the
     engine and the parse), ``disk_bytes`` (frames.h5), ``engine_time_s``."""
     sc = params["scene"]
     n = integrated_particles(params)
@@ -65,9 +66,12 @@ def estimate(case, params: dict, engine: str) -> dict:
     frames_bytes = frames * n * cols * 8
     eng = get_engine(engine)
     t_engine, basis = engine_time_estimate(case, params, engine)
+    # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
+    tp = load_table().get(engine, {}).get(case.scene.kind)
+    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), tp)
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
-    return {"engine": engine, "particles": n, "steps": steps, "frames": frames,
+    return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,
             "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
             "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),
             "disk_bytes": int(frames_bytes), "engine_time_s": float(t_engine), "engine_time_basis": basis}
@@ -94,7 +98,10 @@ def fmt_s(seconds: float) -> str:
 
 
 def describe(size: dict) -> str:
-    return (f"{size['particles']:,} particles, {size['steps']:,} steps, {size['frames']} frames; memory "
+    expected = size.get("steps_expected", size["steps"])
+    steps = (f"{size['steps']:,} steps" if expected >= size["steps"]
+             else f"~{expected:,} steps (at most {size['steps']:,})")
+    return (f"{size['particles']:,} particles, {steps}, {size['frames']} frames; memory "
             f"~{fmt_bytes(size['memory_bytes'])}, frames.h5 ~{fmt_bytes(size['disk_bytes'])}, engine time "
             f"~{fmt_s(size['engine_time_s'])}" + _basis_note(size.get("engine_time_basis", "")))
 
@@ -151,7 +158,8 @@ def engine_time_estimate(case: Case, params: dict, engine_name: str) -> tuple[fl
     sc = params["scene"]
     n = integrated_particles(params)
     steps = sc.get("total_steps", sc["steps"])
-    t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case))
+    t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case),
+                                    plan=step_plan(case.scene.kind, sc))
     if t == t:         # not NaN: a measured model
         return t, basis
     return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case)), BARE_BASIS

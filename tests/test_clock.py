@@ -122,3 +122,47 @@ def test_packings_of_nearly_one_size_count_as_one_size():
     tp = fit(_runs(2e-4, 1e-6, 0.5, [226, 228]))
     assert tp.per_step_s == 0 and "one size" in tp.note
     assert tp.engine_time(227, 10_000) == pytest.approx(0.5 + 10_000 * (2e-4 + 227e-6), rel=0.01)
+
+
+def _triaxial_run(root, name: str, chunks: int | None, steps_run: int | None = None):
+    """A complete triaxial_smoke run directory with the case's real derived numbers whose stage 1
+    took ``chunks`` chunks (engine time 1 ms per step)."""
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    from orchestrator.registry import get_scene
+    params = derive(load_case("cases/triaxial_smoke.yaml")).to_dict()
+    plan = get_scene("triaxial").step_plan(params["scene"])
+    steps = steps_run if steps_run is not None else plan.fixed + chunks * plan.unit
+    d = root / "triaxial_smoke" / f"yade-{name}"
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text(json.dumps({
+        "engine": "yade", "status": "complete", "steps": params["scene"]["total_steps"], "steps_run": steps,
+        "n_particles": 300, "wall_time": {"engine": 1e-3 * steps, "engine_loop": 0}}))
+    (d / "params.json").write_text(json.dumps(params, default=str))
+    (d / "case.yaml").write_text("scene: {kind: triaxial}\n")
+    return plan, params
+
+
+def test_triaxial_estimate_takes_the_chunks_measured_runs_took(tmp_path, monkeypatch):
+    """The triaxial's stage 1 goes on chunk by chunk until it converges (at most max_chunks): the
+    clock learns how many chunks the engine's runs took (median) and the dry run estimates with
+    those, not with the budget of every chunk (YADE smoke: 12 of 40 chunks; the budget made the
+    estimate 1.9x the engine time, docs/validation.md). A run that skipped the plan (stage 1 out of
+    chunks, no drag ramp) does not count."""
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    from orchestrator.sizing import estimate
+    runs = tmp_path / "runs"
+    for name, k in (("a", 11), ("b", 12), ("c", 14)):
+        plan, params = _triaxial_run(runs, name, k)
+    _triaxial_run(runs, "short", None, steps_run=5000)          # fewer steps than the fixed part
+    table = tmp_path / "throughput.json"
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(table))
+    fitted = refresh([runs], table)["yade"]["triaxial"]
+    assert fitted.units == pytest.approx(12.0) and fitted.runs == 4
+    case = load_case("cases/triaxial_smoke.yaml")
+    size = estimate(case, derive(case), "yade")
+    assert size["steps"] == params["scene"]["total_steps"] == plan.fixed + plan.max_units * plan.unit
+    assert size["steps_expected"] == plan.fixed + 12 * plan.unit
+    assert size["engine_time_s"] == pytest.approx(fitted.engine_time(300, size["steps_expected"]))
+    assert size["engine_time_s"] < 0.7 * fitted.engine_time(300, size["steps"])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import stat
 import subprocess
 import sys
@@ -344,6 +345,10 @@ def test_progress_reaches_a_redirected_log_while_the_engine_runs(tmp_path, engin
             time.sleep(0.5)
         alive = proc.poll() is None
     finally:
+        # what the test needs is in the log now: stop the run (SIGTERM, its engine with it) rather than
+        # wait ~20 s for the whole smoke case
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(timeout=900)
     assert alive, f"the run ended before its log showed a start and a progress line:\n{seen}"
     assert "shear_cell_smoke: 228 particles" in seen, seen          # the start line, with the sizing

@@ -12,7 +12,9 @@ silently (docs/architecture.md).
 """
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Mapping, Protocol
 
@@ -50,6 +52,28 @@ class EngineOutput(Protocol):
     def wall_rows(self) -> np.ndarray | None:
         """The deck's wall-sampler rows (columns as the scene's ``wall_columns``), step-sorted
         as written, or None when the deck wrote none."""
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """The step count of a run that is decided while it runs (e.g. a stage that goes on until a
+    test passes): ``steps = fixed + unit * units`` with ``1 <= units <= max_units`` [steps, -].
+    The derived ``steps`` budget is the largest, ``fixed + unit * max_units``; the clock
+    (:mod:`orchestrator.clock`) estimates with the units the engine's measured runs of the scene
+    took."""
+    fixed: int
+    unit: int
+    max_units: int
+
+    def units_of(self, steps_run: int) -> float:
+        """How many units a run of ``steps_run`` steps took [-]."""
+        return (steps_run - self.fixed) / self.unit
+
+    def steps(self, units: float) -> int:
+        """Steps of a run taking ``units`` units, rounded up (a step or two past a unit boundary, as
+        YADE's last step, is not a unit more) and clipped to [1, max_units] [-]."""
+        k = min(max(math.ceil(units - 0.01), 1), self.max_units)
+        return self.fixed + self.unit * k
 
 
 class Scene(ABC):
@@ -119,6 +143,11 @@ class Scene(ABC):
         sc = params.scene
         return StabilityInputs(n_particles=int(getattr(sc, "n", 0)), total_steps=int(getattr(sc, "steps", 0)),
                                box_lo=getattr(sc, "box_lo", None), box_hi=getattr(sc, "box_hi", None))
+
+    def step_plan(self, scene_params: Mapping) -> StepPlan | None:
+        """The variable part of the run's step count (:class:`StepPlan`), from the scene's numbers
+        (``params.json``'s ``scene``); None (the default): the derived ``steps`` are what a run takes."""
+        return None
 
     # -- files -----------------------------------------------------------------------------
     def prepare(self, case, params: Params, run_dir: Path) -> tuple[dict, ScenePart]:

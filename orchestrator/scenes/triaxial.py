@@ -508,6 +508,15 @@ def _sample_size_uncached(case):
     return D * k, H * k, n, d
 
 
+def step_plan(scene_params) -> base.StepPlan:
+    """Stage 1 goes on chunk by chunk until the stresses are within tolerance (at most
+    ``iso.max_chunks`` chunks; the drag ramp's chunks and the loading are fixed): the step count
+    a run takes is ``drag_ramp_steps + shear_steps + chunk * (chunks it took)``."""
+    iso = scene_params["iso"]
+    return base.StepPlan(fixed=int(iso["drag_ramp_steps"]) + int(scene_params["shear_steps"]),
+                         unit=int(iso["chunk"]), max_units=int(iso["max_chunks"]))
+
+
 def stability_inputs(case, params) -> StabilityInputs:
     """What orchestrator.stability's pre-run check and in-deck monitors need: the confining
     pressure, the platen speeds (stage-1 servo limit, stage-2 loading), the sample height and the
@@ -1057,6 +1066,7 @@ class TriaxialScene(base.Scene):
     size_range = staticmethod(size_range)
     stability_inputs = staticmethod(stability_inputs)
     prepare = staticmethod(prepare)
+    step_plan = staticmethod(step_plan)
 
     def post(self, run_dir, params, output):
         return compute_extras(run_dir, params, output.frame_steps, output.positions)
