@@ -9,6 +9,9 @@ its dump/chunk.*.npz), and once the run is complete the loading figures: σ3 str
 of 10-row means), the largest |ε_v(boundary) - ε_v(hull)|, K'/U (non-affine kinetic over Hertz
 elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3, ε_v at
 ε_a = 1, 2, 5, 10, 15 % (orchestrator.stability.observables, the source of the crossval numbers).
+``stage1_speeds``: per stage-1 frame the median, rms and largest grain speed and the boundary
+volume change, by phase (full drag, ramp, drag-free): whether the drag-supported sample comes to
+rest or creeps.
 """
 from __future__ import annotations
 
@@ -73,6 +76,32 @@ def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int 
     return out
 
 
+def stage1_speeds(run: Path, log: str, steps: np.ndarray, sp: np.ndarray) -> list:
+    """Per stage-1 frame: (step, phase, median and rms grain speed [m/s], fastest [m/s], grains above
+    1 m/s, boundary volume change since the previous frame [-]). phase: "drag" (full drag), "ramp",
+    "free" (drag off, stage 1 going on). Whether the drag-supported sample comes to rest (a static
+    packing the drag's removal would not disturb) or creeps at a steady rate."""
+    ramp = _log_steps(log, r"^ISO converged with drag: drag ramped to zero over \d+ steps from step (\d+)")
+    off = _log_steps(log, r"^ISO drag off at step (\d+)")
+    start = _log_steps(log, r"^SHEAR (?:start at iter|from step) (\d+)")
+    vol = None
+    if (run / "triax.txt").exists():
+        a = np.loadtxt(run / "triax.txt", comments="#", ndmin=2)
+        vol = (a[:, 0], a[:, 9])
+    rows, v_prev = [], None
+    for k, st in enumerate(steps):
+        if start and st > start[0]:
+            break
+        phase = "free" if off and st > off[0] else "ramp" if ramp and st > ramp[0] else "drag"
+        v = float(np.interp(st, *vol)) if vol is not None else float("nan")
+        dv = (v - v_prev) / v_prev if v_prev else float("nan")
+        v_prev = v
+        s = sp[k]
+        rows.append((int(st), phase, round(float(np.median(s)), 4), round(float(np.sqrt(np.mean(s ** 2))), 4),
+                     round(float(s.max()), 2), int((s > FLOOR).sum()), float(f"{dv:.2e}")))
+    return rows
+
+
 def report(run: Path) -> dict:
     run = Path(run)
     log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
@@ -94,6 +123,8 @@ def report(run: Path) -> dict:
         after = [r for r in rows if r[0] > off[0]]
         if after:
             out["frame_after_drag_off"] = after[0]
+    if len(steps):
+        out["stage1_speeds"] = stage1_speeds(run, log, steps, sp)
     summ = run / "scene_summary.json"
     if summ.exists():
         s = json.loads(summ.read_text())
