@@ -95,6 +95,9 @@ def check_inserted_clumps(run_dir, params) -> None:
 #: none), sum of the top platen's speed samples [m/s] over steps 0..step and the one of the step,
 #: sample height H0 [m] and step when loading began (0 before)
 RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ramp_start", "ztot", "vlast", "H0", "shear_start")
+#: the column a deck with the creep test (scene.isotropic.creep_tolerance) adds: the last chunk-mean
+#: boundary volume [m^3], as printed (text, like TEXT_COLUMNS)
+CREEP_COLUMN = "vprev"
 #: the columns a resumed deck sets from their text as LIGGGHTS printed it (15 digits): the deck it
 #: resumes gave them the same text (``variable ZS equal ${ztend}``), so both runs hold the same double
 TEXT_COLUMNS = ("ztot", "vlast", "H0")
@@ -109,15 +112,16 @@ def read_restart_states(run_dir: Path) -> dict[int, dict]:
         return out
     for line in f.read_text().splitlines():
         parts = line.split()
-        if len(parts) != len(RESTART_STATE_COLUMNS):
+        cols = RESTART_STATE_COLUMNS + ((CREEP_COLUMN,) if len(parts) == len(RESTART_STATE_COLUMNS) + 1 else ())
+        if len(parts) != len(cols):
             continue                                    # a line cut by a kill, or a comment
         try:
-            row = dict(zip(RESTART_STATE_COLUMNS, (float(x) for x in parts)))
+            row = dict(zip(cols, (float(x) for x in parts)))
         except ValueError:
             continue
         for k in ("step", "stage", "chunks", "dragon", "ramp_start", "shear_start"):
             row[k] = int(row[k])
-        row["text"] = {k: parts[RESTART_STATE_COLUMNS.index(k)] for k in TEXT_COLUMNS}
+        row["text"] = {k: parts[cols.index(k)] for k in TEXT_COLUMNS + (CREEP_COLUMN,) if k in cols}
         out[row["step"]] = row
     return out
 

@@ -25,13 +25,14 @@ class Controller:
     radius), radius0 [m], series_columns, correction_rows, correction_gain, correction_limit,
     drag_free_end, drag_viscosity [Pa s], drag_ramp_steps (0: the drag goes off at once), node_drag, friction,
     iso_friction, particle_mat (material id), restore_friction_early (optional: contact.friction once stage 1
-    has converged with the drag, before its ramp).
+    has converged with the drag, before its ramp), creep_tolerance (optional: the drag stage also needs the
+    chunk-mean boundary volume to change by less than this fraction from the last chunk's).
     ``bodies``: bot, top (platen ids), ids, pids (grains), clump_ids (or None).
     ``membrane``: a :class:`.membrane.Membrane`; ``rec``: the :class:`.recorder.Recorder`;
     ``drag``: the stage-1 LinearDragEngine; ``state``: a checkpoint's saved state (resume)."""
 
     #: what a checkpoint keeps of a Controller (get_state / the constructor's ``state``)
-    STATE = ("stage", "v", "chunk_rows", "chunks", "shear_end", "area", "corr", "s3_avg", "ramp_start")
+    STATE = ("stage", "v", "chunk_rows", "chunks", "shear_end", "area", "corr", "s3_avg", "ramp_start", "v_prev")
 
     def __init__(self, cfg, bodies, membrane, rec, drag, state=None):
         self.cfg, self.membrane, self.rec, self.drag = cfg, membrane, rec, drag
@@ -48,6 +49,7 @@ class Controller:
             return
         self.stage = 1
         self.v = 0.0
+        self.v_prev = 0.0              # the last stage-1 chunk's mean boundary volume [m^3] (creep test)
         self.chunk_rows = []
         self.chunks = 0
         self.out = open("triax.txt", "w")
@@ -156,7 +158,7 @@ class Controller:
         self.out.write("%d %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n" % (
             it, t, self.stage, zb, zt, f_bot, f_top, f_lat, geo["area"], geo["volume"], p_now))
         if self.stage == 1:
-            self.chunk_rows.append((s1, s3))
+            self.chunk_rows.append((s1, s3, geo["volume"]))
             self.area = geo["volume"] / H
             # this runner fires at O.iter = 0 mod series_every, and the chunk is a multiple of it
             if O.iter % c["chunk"] == 0 and O.iter >= c["ramp_steps"]:
@@ -174,8 +176,9 @@ class Controller:
     def _end_chunk(self, H):
         c = self.cfg
         P = c["pressure"]
-        m1 = sum(r[0] for r in self.chunk_rows) / len(self.chunk_rows)
-        m3 = sum(r[1] for r in self.chunk_rows) / len(self.chunk_rows)
+        rows = self.chunk_rows
+        m1 = sum(r[0] for r in rows) / len(rows)
+        m3 = sum(r[1] for r in rows) / len(rows)
         self.chunk_rows = []
         self.membrane.relax()
         if self.ramp_start is not None and self.grain_drag_on():
@@ -190,6 +193,17 @@ class Controller:
         self.chunks += 1
         print("ISO chunk %d: sigma1/p = %.4f sigma3/p = %.4f" % (self.chunks, m1 / P, m3 / P), flush=True)
         conv = law.iso_converged(m1, m3, P, c["tolerance"])
+        if c.get("creep_tolerance"):
+            # the volume-creep test of the drag stage (scene.isotropic.creep_tolerance; as LIGGGHTS' deck)
+            mv = sum(r[2] for r in rows) / len(rows)
+            v_prev = self.v_prev or 0.0
+            still = v_prev > 0 and abs(mv - v_prev) < c["creep_tolerance"] * v_prev
+            print("ISO creep: chunk-mean volume change %.15g (tolerance %g)" % ((mv - v_prev) / v_prev, c["creep_tolerance"])
+                  if v_prev > 0 else "ISO creep: chunk-mean volume change n/a (first chunk)", flush=True)
+            self.v_prev = mv
+            if conv and self.grain_drag_on() and not still:
+                print("ISO converged with drag, still creeping: the drag stays on", flush=True)
+                conv = False
         if c["drag_free_end"] and conv and self.grain_drag_on():
             # converged with the drag: switch it off (or ramp it to zero) and converge again without it
             conv = False

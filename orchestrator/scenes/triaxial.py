@@ -175,6 +175,12 @@ class Isotropic(Strict):
                                                     "(derive(): the rearrangement time under the initial drag, "
                                                     "t_i²/τ_d; ~2 d50 of drift at the terminal speed), rounded up to "
                                                     "whole chunks; 0: off at once (the sample burst: 6-11 m/s)")
+    creep_tolerance: float | None = Field(None, gt=0, lt=0.1, description="stage 1 with the drag ends (the drag's "
+                                          "ramp begins) only when, besides the stresses, the boundary volume "
+                                          "changed by less than this fraction between the means of the last two "
+                                          "chunks: the drag-supported sample creeps (densifies) long after its "
+                                          "stresses converge, and collapses when the drag goes (docs/triaxial.md). "
+                                          "None: the stresses alone")
     friction: float | None = Field(None, ge=0, description="grain-grain friction coefficient during stage 1 (sample "
                                                        "preparation; None: contact.friction). A lower value gives a "
                                                        "denser sample, as the seed's vibrated, tapped one (seed 001 "
@@ -545,7 +551,7 @@ class TriaxialParams(ScenePart):
     strain_rate: float        #: loading strain rate [1/s]
     inertial_number: float    #: loading inertial number [-]
     shear_steps: int          #: steps of the loading stage [-]
-    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s], drag_ramp_steps (linear ramp of the drag to zero, whole chunks; 0: off at once), drag_ramp_time [s]
+    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s], drag_ramp_steps (linear ramp of the drag to zero, whole chunks; 0: off at once), drag_ramp_time [s], creep_tolerance (only when asked: largest relative change of the chunk-mean boundary volume for the drag stage to end) [-]
     dump_every: int           #: steps between frames [-]
     series_every: int         #: steps between series rows [-]
     steps: int                #: steps of both stages [-]
@@ -656,6 +662,10 @@ def derive(case, common: Params) -> TriaxialParams:
     # d50, the time to drift ~2 d50 at the terminal speed (6 d50/(pi v_t)). Letting b fall at the rate at which
     # the sample relaxes at the current drag, db/dt = -b/T(b) with T(b) = t_i^2 b/m, gives db/dt = -m/t_i^2:
     # a LINEAR ramp from b0 to zero lasting T(b0). It ends at a chunk boundary (both decks test chunks).
+    if s.isotropic.creep_tolerance and not (nu > 0 and s.isotropic.drag_free_end):
+        raise DerivationError("scene.isotropic.creep_tolerance tests the volume creep of the drag stage, but this case "
+                              "has no drag stage (isotropic.drag or drag_free_end is false): remove creep_tolerance or "
+                              "turn the drag stage on")
     drag_ramp_time = s.isotropic.drag_ramp * 18 * nu / p if nu > 0 else 0.0
     drag_ramp_steps = int(math.ceil(drag_ramp_time / dt / iso_chunk - 1e-9)) * iso_chunk if drag_ramp_time > 0 else 0
     params = {
@@ -673,7 +683,9 @@ def derive(case, common: Params) -> TriaxialParams:
                 "restore_friction": s.isotropic.restore_friction,
                 "drag_coefficient": 6 * math.pi * nu,
                 # linear ramp of the drag coefficient to zero once stage 1 has converged with it (whole chunks)
-                "drag_ramp_steps": drag_ramp_steps, "drag_ramp_time": drag_ramp_time},
+                "drag_ramp_steps": drag_ramp_steps, "drag_ramp_time": drag_ramp_time,
+                # the volume-creep test of the drag stage (a key only when asked: runs without it keep their hash)
+                **({"creep_tolerance": s.isotropic.creep_tolerance} if s.isotropic.creep_tolerance and nu > 0 else {})},
         "dump_every": dump_every, "series_every": series_every,
         "steps": total_iso + drag_ramp_steps + shear_steps, "total_steps": total_iso + drag_ramp_steps + shear_steps,
         # resume points every frame interval: YADE checkpoints (O.save) at the start of every
