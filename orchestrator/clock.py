@@ -197,7 +197,7 @@ def step_plan(kind: str, scene_params: dict):
     from .registry import get_scene      # the scenes import the case models: not needed to read the table
     try:
         return get_scene(kind).step_plan(scene_params)
-    except Exception:                    # noqa: BLE001 - an unknown kind or old params: no plan
+    except (LookupError, TypeError, ValueError):     # an unknown kind (RegistryError), numbers without the keys
         return None
 
 
