@@ -108,6 +108,9 @@ def report(run: Path) -> dict:
     out: dict = {"run": str(run)}
     chunks = re.findall(r"^ISO chunk (\d+): sigma1/p = ([\d.eE+-]+) sigma3/p = ([\d.eE+-]+)", log, re.M)
     out["iso_chunks"] = [(int(a), round(float(b), 4), round(float(c), 4)) for a, b, c in chunks]
+    creep = re.findall(r"^ISO creep: chunk-mean volume change (\S+)", log, re.M)
+    if creep:        # isotropic.creep_tolerance: the chunk-mean volume change after every tested chunk
+        out["iso_creep_per_chunk"] = [None if x == "n/a" else float(f"{float(x):.3g}") for x in creep]
     out["ramp_start"] = _log_steps(log, r"^ISO converged with drag: drag ramped to zero over \d+ steps from step (\d+)")
     off = _log_steps(log, r"^ISO drag off at step (\d+)")
     if not off and re.search(r"^ISO converged with drag: drag off", log, re.M):
