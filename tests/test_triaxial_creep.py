@@ -55,15 +55,19 @@ def test_liggghts_resume_line_carries_the_last_chunk_volume(tmp_path):
     assert st[7680]["text"]["vprev"] == "2.81234567890123e-08" and st[7680]["chunks"] == 2
 
 
+#: the creep tolerance per engine: stresses within 10 % from chunk 2 on while the volume still creeps,
+#: so the drag must wait (measured: LIGGGHTS' shell sample 4-8e-4 per chunk, passing at chunk 4; YADE's
+#: membrane sample 2.3-7.7e-3, passing at chunk 8: the membrane creeps more, docs/triaxial.md)
+CREEP_TOL = {"liggghts": 4.5e-4, "yade": 2.4e-3}
+
+
 @pytest.mark.engine
 @pytest.mark.parametrize("eng", ["liggghts", pytest.param("yade", marks=pytest.mark.slow)])
 def test_drag_stage_waits_for_the_volume_creep_to_stop(eng, tmp_path):
     from orchestrator.runner import run_case
     if shutil.which(eng) is None:
         pytest.fail(f"{eng} is not installed; run `bash .ci/setup`")
-    # stresses within 10 % from chunk 2 on, while the volume still creeps by 4-8e-4 per chunk: the drag
-    # must wait for the creep to fall below 4.5e-4 (measured on LIGGGHTS: chunk 4)
-    tol = 4.5e-4
+    tol = CREEP_TOL[eng]
     case = _case(creep_tolerance=tol, tolerance=0.1)
     out = run_case(case, eng, runs_root=tmp_path, progress=False, analyze=False)
     assert out.status == "complete", out.status
