@@ -180,10 +180,31 @@ def _raw_output(engine: str, run_dir: Path, upto: int):
     return frames, count, rows[rows[:, 0] <= upto]
 
 
-@pytest.mark.parametrize("engine", ["liggghts", "yade"])
-def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
+def _chunk_tests(run_dir: Path) -> dict[int, str]:
+    """{chunk: its test's lines} from a run's log: the "ISO chunk k" line and the "ISO creep" line that
+    follows it (the last printing of each chunk: a resumed run's log holds the killed part too)."""
+    out, k = {}, None
+    for line in re.findall(r"^ISO (?:chunk|creep).*$", (run_dir / "engine.log").read_text(errors="replace"), re.M):
+        if line.startswith("ISO chunk"):
+            k = int(line.split()[2].rstrip(":"))
+            out[k] = line
+        elif k is not None:
+            out[k] += "\n" + line
+    return out
+
+
+#: the smoke case with the drag stage's volume-creep test: its last chunk-mean volume is resume state
+CREEP = REPO / "tests" / "data" / "triaxial_smoke_creep.yaml"
+
+
+@pytest.mark.parametrize("engine,case", [pytest.param("liggghts", SMOKE, id="liggghts"),
+                                         pytest.param("yade", SMOKE, id="yade"),
+                                         pytest.param("liggghts", CREEP, id="liggghts-creep",
+                                                      marks=pytest.mark.slow(reason="a third kill-and-resume "
+                                                                             "sequence, ~40 s"))])
+def test_killed_triaxial_resumes_exactly(engine, case, tmp_path, engines_installed):
     quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    cmd = lambda runs: orchestrator("run", str(SMOKE), "--engine", engine, "--runs", str(runs), "--quiet")
+    cmd = lambda runs: orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet")
     n_points = 3
     # 1. uninterrupted to its n-th resume point T, then killed there
     ref = subprocess.Popen(cmd(tmp_path / "ref"), **quiet)
@@ -221,6 +242,12 @@ def test_killed_triaxial_resumes_exactly(engine, tmp_path, engines_installed):
         resumed_at = int(re.search(r"^RESUMED at iter (\d+)", log, flags=re.M).group(1))
     assert first <= resumed_at < T
 
+    # the stage-1 chunk tests as the uninterrupted run printed them (with the creep test: the change of
+    # the chunk-mean volume, whose last mean a resumed deck takes from its state line)
+    a, b = _chunk_tests(run_dir()), _chunk_tests(ref_dir())
+    common = sorted(set(a) & set(b))
+    assert all(a[k] == b[k] for k in common), [(a[k], b[k]) for k in common if a[k] != b[k]]
+    assert common or case != CREEP, "no chunk test before T: the creep state was not exercised"
     want, n_want, rows_want = _raw_output(engine, ref_dir(), T)
     got, n_got, rows_got = _raw_output(engine, run_dir(), T)
     # frames up to T (YADE's are stamped one step after its checkpoint multiples), some after the resume
