@@ -65,12 +65,15 @@ def load_packing(ip) -> dict:
 
 
 def packing_digest(ip) -> str:
-    """sha256 of the frames file and the frame index (enters the run hash)."""
+    """sha256 of the packing the run starts from (enters the run hash): the ids, radii and positions
+    of the grains :func:`load_packing` takes from the frame, and the id shift. Not of the file's
+    bytes: a frames file written again with the same grains (its ``meta.created`` differs) is the
+    same initial packing, and the run made from it is reused."""
+    pk = load_packing(ip)
     h = hashlib.sha256()
-    with open(_frames_path(ip), "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    h.update(str(ip.frame).encode())
+    for key in ("id", "radius", "position"):
+        h.update(np.ascontiguousarray(pk[key], dtype="<i8" if key == "id" else "<f8").tobytes())
+    h.update(str(pk["id_shift"]).encode())
     return h.hexdigest()
 
 

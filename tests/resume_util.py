@@ -13,13 +13,29 @@ from orchestrator.registry import get_engine
 from orchestrator.runner import read_summary
 
 
+def _engine_running_in(run_dir: Path) -> bool:
+    """Whether a process works in ``run_dir`` (engines run with the run directory as their cwd)."""
+    want = str(Path(run_dir).resolve())
+    for p in Path("/proc").iterdir():
+        if p.name.isdigit():
+            try:
+                if os.readlink(p / "cwd") == want:
+                    return True
+            except OSError:             # gone meanwhile, or not ours to read
+                continue
+    return False
+
+
 def kill_run(proc: subprocess.Popen, run_dir: Path) -> None:
     """Kill an ``orchestrator run`` started with ``start_new_session=True`` (its engine dies with it
     through PDEATHSIG) and check the run is left interrupted: ``running`` on disk, read as
     ``interrupted`` (no live process holds its lock), no frames.h5."""
     os.killpg(proc.pid, signal.SIGKILL)                 # the orchestrator dies...
     proc.wait()
-    time.sleep(1.0)                                     # ...and its engine with it (PDEATHSIG)
+    t0 = time.time()                                    # ...and its engine with it (PDEATHSIG)
+    while _engine_running_in(run_dir) and time.time() - t0 < 10:
+        time.sleep(0.05)
+    assert not _engine_running_in(run_dir), "the engine outlived its killed orchestrator"
     assert json.loads((run_dir / "summary.json").read_text())["status"] == "running"    # as it was killed
     assert read_summary(run_dir)["status"] == "interrupted"       # no live owner: read as interrupted
     assert not (run_dir / "frames.h5").exists()
