@@ -69,7 +69,11 @@ def packing_digest(ip) -> str:
     of the grains :func:`load_packing` takes from the frame, and the id shift. Not of the file's
     bytes: a frames file written again with the same grains (its ``meta.created`` differs) is the
     same initial packing, and the run made from it is reused."""
-    pk = load_packing(ip)
+    return _digest(load_packing(ip))
+
+
+def _digest(pk: dict) -> str:
+    """sha256 of a loaded packing (:func:`packing_digest`)."""
     h = hashlib.sha256()
     for key in ("id", "radius", "position"):
         h.update(np.ascontiguousarray(pk[key], dtype="<i8" if key == "id" else "<f8").tobytes())
@@ -128,7 +132,7 @@ def apply_initial_packing(case, params, run_dir) -> dict | None:
     write_particle_table(Path(run_dir) / "particles.txt", pk["id"], pk["radius"], case.material.density,
                          pk["position"])
     return {"source": pk["source"], "frame": pk["frame"], "grains": int(len(pk["id"])), "id_shift": pk["id_shift"],
-            "absent_in_frame": pk["n_absent"], "digest": packing_digest(ip), "_radii": np.sort(pk["radius"])}
+            "absent_in_frame": pk["n_absent"], "digest": _digest(pk), "_radii": np.sort(pk["radius"])}
 
 
 def verify_written(case, run_dir, info) -> None:

@@ -65,10 +65,10 @@ def estimate(case, params: dict, engine: str) -> dict:
     cols = 1 + 3 * (1 + o.velocity + o.angular_velocity + o.force + o.torque) + (7 if o.stress else 0)
     frames_bytes = frames * n * cols * 8
     eng = get_engine(engine)
-    t_engine, basis = engine_time_estimate(case, params, engine)
+    table = load_table()
+    t_engine, basis = engine_time_estimate(case, params, engine, table=table)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
-    tp = load_table().get(engine, {}).get(case.scene.kind)
-    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), tp)
+    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), table.get(engine, {}).get(case.scene.kind))
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,
@@ -148,18 +148,18 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
 BARE_BASIS = "from the bare engine's throughput, no run of this engine measured: a lower bound, decks run slower"
 
 
-def engine_time_estimate(case: Case, params: dict, engine_name: str) -> tuple[float, str]:
+def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict | None = None) -> tuple[float, str]:
     """(engine wall time [s], basis) estimated from the derived step count and particle count with
     the cost model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps
     (a + b n) / S(workers) per engine and scene); an engine never measured falls back to the
     adapter's bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck
-    runs (the basis says so)."""
+    runs (the basis says so). ``table``: the throughput table (default :func:`orchestrator.clock.load_table`)."""
     eng = get_engine(engine_name)
     sc = params["scene"]
     n = integrated_particles(params)
     steps = sc.get("total_steps", sc["steps"])
     t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case),
-                                    plan=step_plan(case.scene.kind, sc))
+                                    table=table, plan=step_plan(case.scene.kind, sc))
     if t == t:         # not NaN: a measured model
         return t, basis
     return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case)), BARE_BASIS

@@ -114,6 +114,10 @@ def test_membrane_correction_raises_the_pressure_when_the_grains_feel_less_and_s
     corr, avg = control.membrane_correction(1.0, 1e5, 1e5, 1e5, 20, 0.5, 0.1)
     assert corr == 1.0
     assert control.iso_converged(1.01e5, 0.99e5, 1e5, 0.02) and not control.iso_converged(1.03e5, 1e5, 1e5, 0.02)
+    # the drag stage's creep test: relative change of the chunk-mean volume below the tolerance, never
+    # before a last chunk exists
+    assert control.creep_settled(1.0002, 1.0, 3e-4) and not control.creep_settled(0.9995, 1.0, 3e-4)
+    assert not control.creep_settled(1.0, 0.0, 3e-4)
 
 
 def test_window_series_rows_are_means_of_the_samples(tmp_path):

@@ -44,6 +44,13 @@ def membrane_correction(corr: float, s3_avg, s3: float, p: float, rows: int, gai
     return min(1.0 + limit, max(1.0 - limit, corr)), s3_avg
 
 
+def creep_settled(v_mean: float, v_prev: float, tol: float) -> bool:
+    """The drag stage's volume-creep test (scene.isotropic.creep_tolerance, as LIGGGHTS' deck): the
+    chunk-mean boundary volume ``v_mean`` [m^3] differs from the last chunk's ``v_prev`` by less than
+    ``tol`` of it (False before a last chunk exists: ``v_prev`` 0)."""
+    return v_prev > 0 and abs(v_mean - v_prev) < tol * v_prev
+
+
 def iso_converged(m1: float, m3: float, p: float, tol: float) -> bool:
     """Stage 1 has converged when the chunk means of sigma1 and sigma3 are both within ``tol`` of p."""
     return abs(m1 / p - 1) < tol and abs(m3 / p - 1) < tol

@@ -197,7 +197,7 @@ class Controller:
             # the volume-creep test of the drag stage (scene.isotropic.creep_tolerance; as LIGGGHTS' deck)
             mv = sum(r[2] for r in rows) / len(rows)
             v_prev = self.v_prev or 0.0
-            still = v_prev > 0 and abs(mv - v_prev) < c["creep_tolerance"] * v_prev
+            still = law.creep_settled(mv, v_prev, c["creep_tolerance"])
             print("ISO creep: chunk-mean volume change %.15g (tolerance %g)" % ((mv - v_prev) / v_prev, c["creep_tolerance"])
                   if v_prev > 0 else "ISO creep: chunk-mean volume change n/a (first chunk)", flush=True)
             self.v_prev = mv

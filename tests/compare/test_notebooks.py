@@ -19,7 +19,7 @@ def test_notebook_runs(name, crossval_smoke, runs_root, tmp_path, request):
     # the crossval notebook on the crossval fixture's two engines (its runs reused). sim_vs_ct writes
     # its CT series where the ct_frames fixture wrote the same one (same scans, segmentation and
     # tracking), so its run from the scanned packing is test_simulation_from_scanned_packing's run
-    # (same case, same file) when both are on one worker, not a second engine run
+    # (same case, same grains: orchestrator.initial_packing.packing_digest) when both are on one worker, not a second engine run
     out = request.getfixturevalue("ct_frames").parent if name == "sim_vs_ct.ipynb" else tmp_path
     nb = execute_notebook(name, runs_root, out, env={"ORCH_ENGINES": "liggghts,yade"})
     assert notebook_images(nb) >= 2, f"{name}: expected plots in the outputs"
