@@ -295,6 +295,7 @@ def _report(path):
 
 
 @pytest.mark.engine
+@pytest.mark.slow(reason="~50 s of YADE: the default suite sat at 15:08 on 27 Nov 2026; LIGGGHTS' clump run stays in it")
 def test_yade_triaxial_with_clumps(tmp_path):
     """A short triaxial run (2 isotropic chunks at most, 1 % axial strain) on clumps: every clump
     keeps its mass and inertia, its members keep their distances in every frame, and YADE's mass
