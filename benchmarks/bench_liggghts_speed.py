@@ -21,6 +21,8 @@ from the packed sample). Each variant is that deck with one ingredient removed o
   per-atom drag variables, evaluated every step);
 - ``-cylinder``, ``-pistons``: only those mesh walls removed;
 - ``shell every 100``: the shell-pressure update every 100 steps instead of 20;
+- triaxial only: ``-servo`` (the top platen's speed a constant instead of the servo chain, which
+  ``move/mesh`` and the speed samples evaluate every step), ``-shell-drag-servo`` (all three);
 - ``bare+gravity``: ``bare`` with the deck's gravity (falling grains rebuild their neighbour lists);
 - ``bare``: the same particles (``particles.data``), materials, time step, neighbour settings and
   Hertz-Mindlin contact law, ``nve/sphere``, nothing else.
@@ -67,8 +69,56 @@ def render(case_file: str, run_dir: Path) -> Path:
     return get_engine("liggghts").render(case, params, run_dir, resume=None)
 
 
+_IF = re.compile(r'^if\s+"([^"]*)"\s+then\s+(.*)$')
+_CONST = re.compile(r"^variable\s+(\w+)\s+equal\s+(-?[0-9.eE+-]+)\s*$")
+
+
+def _fresh_branch(line: str, const: dict[str, str]) -> list[str] | None:
+    """The commands an ``if "COND" then "A" ... [else "B" ...]`` line runs on a fresh start (COND read
+    with the deck's constant stage variables), or None when COND reads anything else."""
+    m = _IF.match(line)
+    if not m:
+        return None
+    cond = re.sub(r"\$\{(\w+)\}", lambda v: const.get(v.group(1), "?"), m.group(1))
+    if "?" in cond:
+        return None
+    branches = re.split(r"\s+else\s+", m.group(2), maxsplit=1)
+    taken = branches[0] if eval(cond.replace("&&", " and ").replace("||", " or "), {}) else \
+        (branches[1] if len(branches) > 1 else "")
+    return re.findall(r'"([^"]*)"', taken)
+
+
+def linearize(lines: list[str]) -> list[str]:
+    """A segmented deck (``label segment`` ... ``jump SELF segment``, restart files between segments) as
+    the straight-line deck of its first segment from a fresh start: the stage variables' ``if`` lines
+    resolved with their initial values (``read_data``, stage 1's friction and drag), the control flow
+    (``label``, ``jump``, ``clear``) dropped. A deck without segments comes back unchanged."""
+    if not any(re.match(r"^label\s+segment\b", ln) for ln in lines):
+        return lines
+    const: dict[str, str] = {}
+    for ln in lines:
+        if re.match(r"^label\s+segment\b", ln):
+            break
+        m = _CONST.match(ln)
+        if m:
+            const[m.group(1)] = m.group(2)
+    const.setdefault("stp", "0")            # variable stp equal step: 0 at the first segment's start
+    out = []
+    for ln in lines:
+        if re.match(r"^(label|jump|clear)\b", ln):
+            continue
+        taken = _fresh_branch(ln, const)
+        if taken is None:
+            out.append(ln)
+        else:
+            out += [c for c in taken if not c.startswith("jump")]
+    return out
+
+
 def cut(lines: list[str]) -> tuple[list[str], int, str]:
-    """The deck before its first production run, that run's chunk length and its monitor clause."""
+    """The deck before its first production run, that run's chunk length and its monitor clause
+    (a segmented deck is first made straight: ``linearize``)."""
+    lines = linearize(lines)
     k = next(i for i, ln in enumerate(lines) if _RUN.match(ln))
     m = _RUN.match(lines[k])
     every = int(m.group(4)) if m.group(4) else 0
@@ -163,7 +213,7 @@ def no_shell(lines):
     if not any(re.match(r"^fix\s+st\s+all\s+store/state", ln) for ln in lines):
         return None
     # the shell updates every 20 steps -> never within the run (same fixes, same variables)
-    lines = _sub(lines, r"^(fix\s+(cs|st)\s+all\s+store/state)\s+20\s", r"\1 100000000 ")
+    lines = _sub(lines, r"^(fix\s+(cs|sel|st)\s+all\s+store/state)\s+20\s", r"\1 100000000 ")
     return _drop(lines, r"^fix\s+press\s")
 
 
@@ -172,7 +222,7 @@ def shell_every(n):
     def f(lines):
         if not any(re.match(r"^fix\s+st\s+all\s+store/state", ln) for ln in lines):
             return None
-        return _sub(lines, r"^(fix\s+(cs|st)\s+all\s+store/state)\s+\d+\s", rf"\1 {n} ")
+        return _sub(lines, r"^(fix\s+(cs|sel|st)\s+all\s+store/state)\s+\d+\s", rf"\1 {n} ")
     return f
 
 
@@ -180,6 +230,15 @@ def no_drag(lines):
     if not any(re.match(r"^fix\s+drag\s", ln) for ln in lines):
         return None
     return _drop(lines, r"^fix\s+drag\s")
+
+
+def no_servo(lines):
+    """The top platen's speed a constant: the servo chain behind ``v_vtop`` (platen force, boundary
+    volume and height, pressure ramp: equal-style variables LIGGGHTS parses at every evaluation) is
+    not evaluated by ``move/mesh`` and the speed samples."""
+    if not any(re.match(r"^variable\s+vtop\s", ln) for ln in lines):
+        return None
+    return [("variable vtop  equal 0.0" if re.match(r"^variable\s+vtop\s", ln) else ln) for ln in lines]
 
 
 def bare(lines, gravity=False):
@@ -217,6 +276,8 @@ VARIANTS = {
     "shell every 100": shell_every(100),
     "-drag": no_drag,
     "-shell-drag": lambda ln: no_drag(no_shell(ln)) if no_shell(ln) is not None else None,
+    "-servo": no_servo,
+    "-shell-drag-servo": lambda ln: no_servo(no_drag(no_shell(ln))) if no_shell(ln) is not None else None,
     "bare+gravity": lambda ln: bare(ln, gravity=True),
     "bare": bare,
 }
@@ -252,7 +313,7 @@ def run_one(path: Path, ranks: int = 1) -> dict:
         cmd = [openmpi_launcher(), "--allow-run-as-root", "--oversubscribe", "-np", str(ranks)] + cmd
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    pr = subprocess.run(cmd, cwd=path.parent, capture_output=True, text=True,
+    pr = subprocess.run(cmd, cwd=path.parent, capture_output=True, text=True, errors="replace",
                         env=dict(os.environ, OMP_NUM_THREADS="1"))
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
