@@ -80,7 +80,7 @@ def _fresh_branch(line: str, const: dict[str, str]) -> list[str] | None:
     if not m:
         return None
     cond = re.sub(r"\$\{(\w+)\}", lambda v: const.get(v.group(1), "?"), m.group(1))
-    if "?" in cond:
+    if not re.fullmatch(r"[-0-9.eE\s=<>!&|()]*", cond):      # only numbers and comparisons are read
         return None
     branches = re.split(r"\s+else\s+", m.group(2), maxsplit=1)
     taken = branches[0] if eval(cond.replace("&&", " and ").replace("||", " or "), {}) else \
