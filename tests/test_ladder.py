@@ -11,6 +11,8 @@ import pytest
 
 from orchestrator.case import load_case
 from orchestrator.compare.ladder import compare_rungs, rungs_for, single_contact_differences
+from orchestrator.derive import derive
+from orchestrator.registry import get_engine
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 SCHEDULE_MINUTES = 2.5        #: the L0 rung on both engines (tests/conftest.py schedule_groups)
@@ -58,6 +60,15 @@ def test_single_contact_explanation_matches_the_derivation():
     assert sc.loc[("adhesion", "yade"), "ξ/ξ_σ = 10"] == pytest.approx(1.0, rel=1e-12)   # DMT exact
     assert sc.loc[("rolling limit", "liggghts"), "ξ/ξ_σ = 0.1"] == pytest.approx(math.sqrt(10), rel=1e-9)
     assert np.isinf(sc.loc[("torsion limit", "yade"), "ξ/ξ_σ = 1"])
+    # LAMMPS (issue #18): DMT per pair and the twist limit μ_tor r_eff F exact for the median pair; the
+    # rolling limit with μ_r frozen at ξ_σ is the same named substitute as on the other two engines
+    assert list(sc.loc[("adhesion", "lammps")].iloc[1:]) == pytest.approx([1.0, 1.0, 1.0], rel=1e-12)
+    assert list(sc.loc[("torsion limit", "lammps")].iloc[1:]) == pytest.approx([1.0, 1.0, 1.0], rel=1e-12)
+    assert sc.loc[("rolling limit", "lammps"), "ξ/ξ_σ = 10"] == pytest.approx(1 / math.sqrt(10), rel=1e-9)
+    case = load_case(CASES / "shear_cell_seed.yaml")
+    params = derive(case)
+    twist = get_engine("lammps").engine_params(case, params)["twisting"]       # what the deck gets
+    assert twist["mu"] == pytest.approx(params.scene.contact.torsion_coefficient * case.scene.psd.median / 4, rel=1e-12)
 
 
 @pytest.mark.engine

@@ -33,7 +33,7 @@ from ..lammps_dump import per_atom_arrays, read_binary_dump, truncate_binary_dum
 from ..liggghts.adapter import DumpOutput, cut_wall_series, dump_columns, write_data_file
 from ..liggghts.segments import deck_segments, dump_segments
 from ..render import render_template
-from .numbers import lammps_numbers, shear_cell_law, shear_cell_regions
+from .numbers import lammps_numbers, seed_term_ratios, shear_cell_law, shear_cell_regions
 
 #: frames.h5 fields the LAMMPS decks dump (no stress yet: refused in render)
 FRAME_FIELDS = ("position", "velocity", "angular_velocity", "force", "torque")
@@ -122,6 +122,9 @@ class Lammps(Engine):
         return "LAMMPS " + m.group(1).strip() if m else (out.splitlines()[0] if out else "unknown")
 
     # -- numbers ----------------------------------------------------------------------------
+    def seed_term_ratios(self, case, params, overlaps):
+        return seed_term_ratios(case, params, overlaps)
+
     def engine_params(self, case, params):
         """:func:`engines.lammps.numbers.lammps_numbers`, and for the shear cell its contact law
         (:func:`~engines.lammps.numbers.shear_cell_law`) and wall regions

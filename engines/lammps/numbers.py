@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from orchestrator.contact_law import DerivationError, restitution_input
 
 
@@ -92,6 +94,27 @@ def rolling_twisting(contact: dict, d50: float, rho: float) -> dict:
         ktw = contact["twisting_stiffness"]
         out["twisting"] = {"k": ktw, "gamma": 2.0 * math.sqrt(ktw * I_eff), "mu": contact["torsion_coefficient"] * r_eff}
     return out
+
+
+def seed_term_ratios(case, params, xs) -> list:
+    """Engine.seed_term_ratios for the median pair (r_eff = x50/4) at the overlaps ``xs`` [m]: ``dmt``
+    adhesion 4πγR* with γ = F_adh/(4π⟨r_eff⟩) (the seed's F_adh r_eff/⟨r_eff⟩: exact for every pair),
+    the ``rolling sds`` limit μ_r R* F_ncrit with μ_r frozen at the expected overlap ξ_σ (the seed's
+    lever √(2 r_eff ξ) grows with the load: a named substitute, as on the other engines), the
+    ``twisting sds`` limit μ_tw F_ncrit with μ_tw = μ_tor r_eff of the median pair (exact for it)."""
+    c = params.scene.contact
+    R = case.scene.psd.median / 2
+    r_eff = R / 2
+    xs = np.asarray(xs, float)
+    rows = []
+    if c.adhesion_force:
+        rows.append(("adhesion", "dmt 4πγR*, γ = F_adh/(4π⟨r_eff⟩)", [r_eff / c.r_eff_mean] * len(xs)))
+    if c.rolling_coefficient is not None:
+        rows.append(("rolling limit", "rolling sds μ_r R* F (μ_r frozen at ξ_σ)",
+                     list(c.rolling_coefficient * r_eff / np.sqrt(2 * r_eff * xs))))
+    if c.torsion_coefficient is not None:
+        rows.append(("torsion limit", "twisting sds μ_tw F, μ_tw = μ_tor r_eff (median pair)", [1.0] * len(xs)))
+    return rows
 
 
 def lammps_numbers(params: dict, case=None) -> dict:
