@@ -52,6 +52,19 @@ def test_a_difference_inside_the_scatter_is_not_significant():
     assert res.parts_at == "L2"
 
 
+def test_one_seed_per_engine_is_judged_by_the_floor_alone():
+    """Without a seed-to-seed scatter nothing is 'within the scatter': a difference beyond its floor
+    is a disagreement (the three-way ladder of 27 Nov 2026 was first printed as 'no rung')."""
+    runs = pd.DataFrame(_runs("L0", "lammps", [0.3173]) + _runs("L0", "yade", [0.3401])
+                        + _runs("L0", "lammps", [5.605e-4], "piston_z") + _runs("L0", "yade", [5.595e-4], "piston_z"))
+    res = compare_rungs(runs, ["L0"])
+    mu = res.comparison[res.comparison.observable == "mu_macro"].iloc[0]
+    assert mu["significant"] is None and mu["relative difference"] > 0.05 and mu["ok"] is not None and not mu["ok"]
+    piston = res.comparison[res.comparison.observable == "piston_z"].iloc[0]
+    assert piston["ok"]
+    assert res.parts_at == "L0"
+
+
 def test_single_contact_explanation_matches_the_derivation():
     sc = single_contact_differences(CASES / "shear_cell_seed.yaml").set_index(["term", "engine"])
     lig = sc.loc[("adhesion", "liggghts")]

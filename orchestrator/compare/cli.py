@@ -95,7 +95,9 @@ def cmd_ladder(args, con) -> int:
     if not con.is_terminal:
         con.width = max(con.width, 150)       # a log keeps every column whole
     con.print(t)
-    con.print(f"engines part at: {res.parts_at or 'no rung (every difference within its floor or the scatter)'}")
+    one_seed = bool(len(res.comparison)) and res.comparison["significant"].isna().all()
+    con.print(f"engines part at: {res.parts_at or 'no rung (every difference within its floor or the scatter)'}"
+              + (" (one seed per engine: no scatter, the floors alone decide)" if one_seed else ""))
     if len(res.explanation):
         con.print(res.explanation.to_string(index=False))
     con.print("wrote " + ", ".join(res.files.values()))

@@ -12,8 +12,10 @@ Rungs (each adds one term to the one below; the top rung is the case as written)
 A rung whose term the case does not ask for is the rung below again and is not run twice. Each
 rung runs on every engine for several packings (``seeds``), so that each observable has a
 run-to-run scatter per engine; an engine difference is *significant* only beyond
-2·√(s_A²/n_A + s_B²/n_B) (s the seed-to-seed standard deviation, n the number of seeds).
-The first rung where a significant difference exceeds its floor is where the engines *part*; the
+2·√(s_A²/n_A + s_B²/n_B) (s the seed-to-seed standard deviation, n the number of seeds); with one
+seed per engine there is no scatter, and a difference is judged by its floor alone.
+The first rung where a difference exceeds its floor (and, when there is a scatter, the scatter) is
+where the engines *part*; the
 ladder lists the substitutes that rung brings in and the single-contact difference between them
 (:func:`single_contact_differences`, the same derivation as ``tests/test_shear_cell.py``).
 
@@ -220,15 +222,23 @@ def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
                     sem2 = (ra["std"] ** 2 / ra["n"] if np.isfinite(ra["std"]) else np.nan) + \
                            (rb["std"] ** 2 / rb["n"] if np.isfinite(rb["std"]) else np.nan)
                     scatter = float(2 * math.sqrt(sem2) / scale) if np.isfinite(sem2) and scale > 0 else float("nan")
-                significant = bool(np.isfinite(scatter) and diff > scatter) if np.isfinite(diff) else False
+                # significant: beyond the seed-to-seed scatter; None when there is no scatter to weigh
+                # the difference against (one seed per engine)
+                if not np.isfinite(diff):
+                    significant = False
+                elif not np.isfinite(scatter):
+                    significant = None
+                else:
+                    significant = bool(diff > scatter)
                 floor = _floor(rung, top, obs)
                 if obs.startswith("volumetric_strain"):
                     floor_ok = absdiff <= EPS_V_FLOOR
                     floor = EPS_V_FLOOR
                 else:
                     floor_ok = None if floor is None else bool(diff <= floor)
-                # a difference within the scatter is not a disagreement, whatever its size
-                ok = None if floor_ok is None else bool(floor_ok or not significant)
+                # a difference within the scatter is not a disagreement, whatever its size; without a
+                # scatter (one seed) the floor alone decides
+                ok = None if floor_ok is None else bool(floor_ok or significant is False)
                 rows.append({"rung": rung, "engines": f"{a} vs {b}", "observable": obs,
                              f"mean A": ra["mean"] if obs != "density_profile" else np.nan,
                              f"mean B": rb["mean"] if obs != "density_profile" else np.nan,
@@ -238,7 +248,7 @@ def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
     parts = None
     for rung in rung_order:
         sel = comp[(comp["rung"] == rung)] if len(comp) else comp
-        if len(sel) and ((sel["significant"]) & (sel["relative difference"] > sel["floor"].fillna(0.05))).any():
+        if len(sel) and (sel["ok"] == False).any():       # noqa: E712 (None: no floor for that observable)
             parts = rung
             break
     return LadderResult("", runs, stats, comp, parts, pd.DataFrame())
