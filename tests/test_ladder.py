@@ -105,3 +105,13 @@ def test_smoke_ladder_l0_on_both_engines(tmp_path):
         assert comp.loc["shearband_z", "relative difference"] <= 0.05
     for f in ("comparison", "runs", "stats", "plot"):
         assert Path(res.files[f]).exists()
+
+
+def test_ladder_plot_has_a_panel_per_engine_pair():
+    from orchestrator.compare.ladder import plot_ladder
+    runs = pd.DataFrame(_runs("L0", "lammps", [0.31]) + _runs("L0", "liggghts", [0.33]) + _runs("L0", "yade", [0.34])
+                        + _runs("L2", "lammps", [0.40]) + _runs("L2", "liggghts", [0.50]) + _runs("L2", "yade", [0.41]))
+    res = compare_rungs(runs, ["L0", "L2"])
+    fig = plot_ladder(res)
+    assert [ax.get_title() for ax in fig.axes] == ["lammps vs liggghts", "lammps vs yade", "liggghts vs yade"]
+    assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["L0", "L2"]

@@ -212,7 +212,8 @@ def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
                 if obs == "density_profile":
                     pa, pb = np.asarray(ra["mean"]), np.asarray(rb["mean"])
                     diff = float(np.linalg.norm(pa - pb) / max(np.linalg.norm(0.5 * (pa + pb)), 1e-300))
-                    scatter = float(np.nanmax([ra["std"], rb["std"]]) / max(np.linalg.norm(0.5 * (pa + pb)), 1e-300))
+                    stds = [v for v in (ra["std"], rb["std"]) if np.isfinite(v)]
+                    scatter = float(max(stds) / max(np.linalg.norm(0.5 * (pa + pb)), 1e-300)) if stds else float("nan")
                     absdiff = diff
                 else:
                     ma, mb = float(ra["mean"]), float(rb["mean"])
@@ -301,28 +302,38 @@ def explain(case_path, rung: str | None, runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot_ladder(res: LadderResult):
-    """Relative engine difference per rung and observable, with the scatter band and floors."""
+    """Relative engine difference per rung and observable, one panel per engine pair (three
+    engines: three panels on one y scale), with the scatter band and the 5 % and 10 % floors."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     comp = res.comparison
-    fig, ax = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
-    if len(comp):
-        rungs = list(dict.fromkeys(comp["rung"]))
-        x = {r: k for k, r in enumerate(rungs)}
-        for obs, g in comp.groupby("observable", sort=False):
+    pairs = list(dict.fromkeys(comp["engines"])) if len(comp) else [""]
+    fig, axes = plt.subplots(1, len(pairs), figsize=(2.2 + 3.2 * len(pairs), 3.6), sharey=True,
+                             constrained_layout=True, squeeze=False)
+    rungs = list(dict.fromkeys(comp["rung"])) if len(comp) else []
+    x = {r: k for k, r in enumerate(rungs)}
+    colors = {}
+    for ax, pair in zip(axes[0], pairs):
+        sel = comp[comp["engines"] == pair] if len(comp) else comp
+        for obs, g in sel.groupby("observable", sort=False):
             xs = [x[r] for r in g["rung"]]
-            ax.plot(xs, 100 * g["relative difference"], "o-", label=obs)
-            ax.fill_between(xs, 0, 100 * g["scatter (2 sem, relative)"].fillna(0), alpha=0.08)
+            line, = ax.plot(xs, 100 * g["relative difference"], "o-", color=colors.get(obs), label=obs)
+            colors.setdefault(obs, line.get_color())
+            ax.fill_between(xs, 0, 100 * g["scatter (2 sem, relative)"].astype(float).fillna(0), alpha=0.08,
+                            color=colors[obs])
         ax.set_xticks(range(len(rungs)), rungs)
+        if len(rungs) == 1:
+            ax.set_xlim(-0.5, 0.5)
+        ax.axhline(5, color="grey", lw=0.8, ls="--")
+        ax.axhline(10, color="grey", lw=0.8, ls="--")
         if res.parts_at:
             ax.axvline(x[res.parts_at], color="k", ls=":", lw=1)
-            ax.text(x[res.parts_at], ax.get_ylim()[1], " engines part", va="top", fontsize=8)
-    ax.axhline(5, color="grey", lw=0.8, ls="--")
-    ax.axhline(10, color="grey", lw=0.8, ls="--")
-    ax.set_ylabel("|A − B| / mean [%]")
-    ax.set_title(f"cross-validation ladder: {res.case}", fontsize=10)
-    ax.legend(fontsize=7, ncol=2)
+        ax.set_title(pair, fontsize=9)
+    axes[0][0].set_ylabel("|A − B| / mean [%]")
+    axes[0][-1].legend(fontsize=7)
+    fig.suptitle(f"cross-validation ladder: {res.case}"
+                 + (f" (engines part at {res.parts_at})" if res.parts_at else ""), fontsize=10)
     return fig
 
 
