@@ -33,6 +33,18 @@ def running_mean(x: np.ndarray, rows: int, mode: str = "same") -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
+def block_sem(x: np.ndarray, blocks: int = 8) -> float:
+    """Standard error of the mean of a correlated series (a steady-state window of μ_macro) from
+    ``blocks`` contiguous block means (fewer when the series is shorter): blocks longer than the
+    correlation time are nearly independent. NaN with fewer than two blocks. Unit: that of ``x``."""
+    x = np.asarray(x, float)
+    nb = min(int(blocks), x.size)
+    if nb < 2:
+        return float("nan")
+    bm = np.array([b.mean() for b in np.array_split(x, nb)])
+    return float(bm.std(ddof=1) / np.sqrt(nb))
+
+
 def multiple_of(n: int, k: int) -> int:
     """``n`` rounded up to a multiple of ``k`` (both positive integers). The scenes put restart steps
     at the end of a wall-averaging window (LIGGGHTS fix ave/time): a run resumed there writes every

@@ -115,3 +115,23 @@ def test_ladder_plot_has_a_panel_per_engine_pair():
     fig = plot_ladder(res)
     assert [ax.get_title() for ax in fig.axes] == ["lammps vs liggghts", "lammps vs yade", "liggghts vs yade"]
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["L0", "L2"]
+
+
+def test_block_sem_sees_the_correlation_the_naive_sem_misses():
+    """orchestrator.numerics.block_sem (μ_macro's in-run error in the ladder report and plane shear):
+    for independent samples it is the naive σ/√n; for a series correlated over 100 samples it is
+    several times larger, as the error of a mean of correlated samples is."""
+    from orchestrator.numerics import block_sem
+    rng = np.random.default_rng(1)
+    white = rng.normal(0, 1, 8000)
+    assert block_sem(white) == pytest.approx(1 / math.sqrt(8000), rel=0.6)
+    red = np.repeat(rng.normal(0, 1, 80), 100)            # 80 independent values, each held 100 samples
+    assert block_sem(red) > 4 * red.std() / math.sqrt(red.size)
+    assert math.isnan(block_sem([1.0]))
+
+
+def test_in_run_spreads_are_not_compared_as_observables():
+    runs = pd.DataFrame([{**r, "mu_macro_sem": 0.01 * (k + 1)} for k, r in
+                         enumerate(_runs("L0", "lammps", [0.30]) + _runs("L0", "yade", [0.31]))])
+    res = compare_rungs(runs, ["L0"])
+    assert set(res.comparison["observable"]) == {"mu_macro"}

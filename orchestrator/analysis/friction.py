@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..numerics import block_sem
 from ._common import Result
 from .plots import plot_friction
 
@@ -57,6 +58,8 @@ def analyze_friction(frames, radius: float | None = None, torque_wall: str | Non
     ``steady_control``: "time" [s] or "angle" [rad] of the torque wall, from which to average).
 
     Tables: ``friction`` (time, angle if known, torque [N m], normal_force [N], mu).
+    Scalars: ``mu_mean``, ``mu_std`` (of the samples), ``mu_sem`` (standard error of the mean from 8
+    block means: the samples are correlated, :func:`orchestrator.numerics.block_sem`), ``n``.
     """
     tw = _pick(frames, "torque", torque_wall)
     fw = _pick(frames, "force", force_wall)
@@ -80,6 +83,7 @@ def analyze_friction(frames, radius: float | None = None, torque_wall: str | Non
     mu = sel["mu"].to_numpy()
     mu = mu[np.isfinite(mu)]
     scal = {"mu_mean": float(mu.mean()) if mu.size else np.nan, "mu_std": float(mu.std(ddof=1)) if mu.size > 1 else np.nan,
+            "mu_sem": block_sem(mu),
             "n": int(mu.size), "radius_m": radius, "torque_wall": tw, "force_wall": fw, "geometry": geometry}
     return Result("friction", tables={"friction": df}, scalars=scal,
                   options={"radius": radius, "torque_wall": tw, "force_wall": fw, "geometry": geometry,

@@ -37,6 +37,7 @@ from ..case import load_case
 from ..derive import derive
 from ..registry import engine_names, get_engine
 from ..stability.executor import get_executor, run_task
+from ..stability.observables import SPREAD_SUFFIXES
 from ..atomic import write_text
 
 __all__ = ["Rung", "RUNGS", "rungs_for", "LadderResult", "run_ladder", "compare_rungs", "FLOORS",
@@ -106,10 +107,6 @@ class LadderResult:
                 + self.comparison.to_html(index=False, float_format=lambda x: f"{x:.4g}"))
 
 
-_SCALARS = ("mu_macro", "shearband_z", "shearband_width", "piston_z", "peak_friction_angle_deg",
-            "residual_friction_angle_deg")
-
-
 def _flatten(obs: dict) -> dict:
     """Scalar observables; vectors become named entries (``density_profile`` stays a list)."""
     out = {}
@@ -166,7 +163,8 @@ def _stats(runs: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (rung, eng), g in ok.groupby(["rung", "engine"], sort=False):
         for col in g.columns:
-            if col in ("rung", "engine", "seed", "status", "run_dir", "engine_time", "error"):
+            if col in ("rung", "engine", "seed", "status", "run_dir", "engine_time", "error") \
+                    or col.endswith(SPREAD_SUFFIXES):          # a run's own spread, not an observable
                 continue
             vals = g[col].dropna()
             if not len(vals):

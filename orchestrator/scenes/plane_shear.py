@@ -36,7 +36,7 @@ from pydantic import Field, field_validator
 
 from ..case import Strict, positive
 from ..contact_law import dashpot_stable_servo_speed, effective_modulus, wall_dashpot_coefficient
-from ..numerics import multiple_of
+from ..numerics import block_sem, multiple_of
 from ..derive import adhesion_force, DerivationError
 from ..params import ContactTerms, Params, ScenePart, StabilityInputs
 from ..particles_io import ensure_particle_table
@@ -347,12 +347,10 @@ def steady_mu(frames, params_or_summary: dict | None = None, steady_from_strain:
     mu = sel["mu"].to_numpy()
     if len(mu) == 0:
         return {"mu": float("nan"), "std": float("nan"), "sem": float("nan"), "n": 0}
-    blocks = np.array_split(mu, min(8, len(mu)))
-    bm = np.array([b.mean() for b in blocks])
     # μ from the mean forces (less biased by noise in F_z than the mean of the ratio)
     mu_f = float(np.abs(sel["shear_force"]).mean() / np.abs(sel["normal_force"]).mean())
     return {"mu": mu_f, "mu_mean_ratio": float(mu.mean()), "std": float(mu.std()),
-            "sem": float(bm.std(ddof=1) / math.sqrt(len(bm))) if len(bm) > 1 else float("nan"),
+            "sem": block_sem(mu),
             "n": int(len(mu)), "steady_from_strain": steady_from_strain,
             "normal_stress_rel_error": float(np.abs(sel["normal_force"]).mean() / frames_target(frames) - 1)
             if frames_target(frames) else float("nan")}

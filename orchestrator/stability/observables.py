@@ -2,10 +2,13 @@
 
 - ``plane_shear``: steady-state μ_macro = |F_x|/|F_z| on the top wall (and its standard error),
   sample height and solid fraction in the steady state;
-- ``shear_cell``: steady μ_macro (3T/(2RF) over the last half of the shear), shear-band position
-  and width in the last frame (erf fit), the axial density profile of the last frame;
+- ``shear_cell``: steady μ_macro (3T/(2RF) over the last half of the shear) and its block standard
+  error, shear-band position and width (the steady fits averaged over the radii, with their spread
+  over the radii), the final piston height, the axial density profile of the last frame;
 - ``impact``: rebound speeds of every sphere.
-Every observable is a float or a list of floats (profiles), SI units.
+Every observable is a float or a list of floats (profiles), SI units. Keys ending in ``_sem``,
+``_std`` or ``_spread`` are a run's own uncertainty of the observable they extend (:data:`SPREAD_SUFFIXES`),
+not observables to compare.
 """
 from __future__ import annotations
 
@@ -20,6 +23,10 @@ from ..analysis.friction import analyze_friction
 from ..analysis import parse_specs
 from ..analysis.shearband import analyze_shearband
 from ..analysis.triaxial import analyze_triaxial
+
+
+#: suffixes of the keys that carry an observable's in-run uncertainty
+SPREAD_SUFFIXES = ("_sem", "_std", "_spread")
 
 
 def observables(case, run_dir) -> dict:
@@ -63,6 +70,8 @@ def _shear_cell(case, fr, params) -> dict:
     try:
         res = analyze_friction(fr, **opts)
         out["mu_macro"] = float(res.scalars["mu_mean"])
+        out["mu_macro_std"] = float(res.scalars["mu_std"])          # in-run spreads: of the samples,
+        out["mu_macro_sem"] = float(res.scalars["mu_sem"])          # of their mean (block means)
     except Exception as exc:
         out["mu_macro_error"] = str(exc)
     try:
@@ -73,6 +82,9 @@ def _shear_cell(case, fr, params) -> dict:
         if st is not None and len(st) and np.isfinite(st["z_sb"]).any():
             out["shearband_z"] = float(np.nanmean(st["z_sb"]))
             out["shearband_width"] = float(np.nanmean(st["w_sb"]))
+            # in-run spread: the steady fits' scatter over the radii r̃
+            out["shearband_z_spread"] = float(np.nanstd(st["z_sb"], ddof=1)) if len(st) > 1 else float("nan")
+            out["shearband_width_spread"] = float(np.nanstd(st["w_sb"], ddof=1)) if len(st) > 1 else float("nan")
         else:
             out["shearband_z"] = float(res.scalars.get("z_sb_last", float("nan")))
             out["shearband_width"] = float(res.scalars.get("w_sb_last", float("nan")))
