@@ -53,6 +53,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("ladder_runs", help="ladder_runs.csv written by `orchestrator crossval --ladder`")
     a = ap.parse_args(argv)
+    if not Path(a.ladder_runs).is_file():
+        raise SystemExit(f"{a.ladder_runs}: no such file; give the ladder_runs.csv that "
+                         "`orchestrator crossval CASE --ladder` wrote (RUNS/<case>/ladder/ladder_runs.csv)")
     runs = pd.read_csv(a.ladder_runs)
     runs = runs[runs["status"] == "complete"].sort_values(["rung", "engine", "seed"])
     print("| rung | engine | seed | μ_macro ± std (± sem, 8 blocks) | z_sb ± std over r̃ [µm] | "
