@@ -184,7 +184,8 @@ def shear_cell_law(params: dict, case, damping: str) -> dict:
     Particle-wall (seed §3.3: the visco-elastic part of eq. 1 only): Hertz with E' = 2(1-ν²)E*_pw
     (:func:`wall_young`), the same damping form (viscoelastic: η_n0 of a median grain against a
     flat wall, m* = m50, R* = x50/2), no adhesion, rolling or twisting; Coulomb μ = ``wall_mu``
-    (0 unless ``scene.wall_friction``)."""
+    (0 unless ``scene.wall_friction``; with ``wall_friction: shear`` the walls are frictionless
+    (``wall``) until the shear stage and frictional (``wall_shear``) from it on)."""
     mat, sc = params["material"], params["scene"]
     c = sc["contact"]
     x50 = case.scene.psd.median
@@ -215,11 +216,13 @@ def shear_cell_law(params: dict, case, damping: str) -> dict:
                        "mu": params["friction"], "damping_model": model}
         out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": d["e_input"],
                        "damping_model": model}
-    if out["wall_mu"] > 0:
-        out["wall"].update({"tangential": "mindlin", "kt": 8.0 * params["G_eff_pw"],
-                            "xgt": tangential_damping_factor(E_pw, params["G_eff_pw"]), "mu": out["wall_mu"]})
-    else:
-        out["wall"].update({"tangential": "linear_nohistory", "kt": None, "xgt": 0.0, "mu": 0.0})
+    frictional = {"tangential": "mindlin", "kt": 8.0 * params["G_eff_pw"],
+                  "xgt": tangential_damping_factor(E_pw, params["G_eff_pw"]), "mu": out["wall_mu"]}
+    frictionless = {"tangential": "linear_nohistory", "kt": None, "xgt": 0.0, "mu": 0.0}
+    if out["wall_mu"] > 0 and sc.get("wall_friction_from", 0) > 0:
+        # scene.wall_friction: shear: frictionless until the shear stage, the wall fixes redefined there
+        out["wall_shear"] = {**out["wall"], **frictional}
+    out["wall"].update(frictional if out["wall_mu"] > 0 and not sc.get("wall_friction_from", 0) else frictionless)
     return out
 
 

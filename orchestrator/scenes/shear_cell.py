@@ -117,11 +117,14 @@ class Scene(Strict):
     wall_samples: int = Field(2000, ge=10, description="wall time-series samples over the whole run")
     wall_adhesion: bool = Field(False, description="seed §3.3: particle-wall contacts use the visco-elastic part "
                                                    "of eq. 1 only (no adhesion)")
-    wall_friction: bool = Field(False, description="seed §3.3: particle-wall contacts use the visco-elastic part of "
-                                                   "eq. 1, the normal Hertz + damping terms only, so no Coulomb "
-                                                   "friction at walls by default; true gives walls the particles' "
-                                                   "Coulomb mu. Rolling and twisting resistance are never applied "
-                                                   "at walls")
+    wall_friction: bool | Literal["shear"] = Field(
+        False, description="seed §3.3: particle-wall contacts use the visco-elastic part of eq. 1, the normal "
+                           "Hertz + damping terms only, so no Coulomb friction at walls by default; true gives "
+                           "walls the particles' Coulomb mu for the whole run; 'shear' only from the start of the "
+                           "shear stage, so that the compression against frictionless walls loads the whole "
+                           "column to the normal stress (with wall friction the sidewall carries part of it, "
+                           "Janssen, and the servo settles short of the target: docs/validation.md). Rolling and "
+                           "twisting resistance are never applied at walls")
 
     _pos = positive("cell_diameter", "gap", "vane_thickness", "plate_thickness", "fill_height", "normal_stress",
                      "final_angle")
@@ -333,8 +336,9 @@ class ShearCellParams(ScenePart):
     box_lo: tuple                #: simulation box [m]
     box_hi: tuple
     wall_adhesion: bool          #: walls keep the adhesion
-    wall_friction: bool          #: walls have Coulomb friction
-    wall_mu: float               #: wall friction coefficient [-]
+    wall_friction: bool | str    #: walls have Coulomb friction (True, False or "shear")
+    wall_mu: float               #: wall friction coefficient once it applies [-]
+    wall_friction_from: int      #: first step of wall_mu (0: the whole run; the shear stage's start for "shear")
 
 
 def derive(case, common: Params) -> ShearCellParams:
@@ -433,7 +437,8 @@ def derive(case, common: Params) -> ShearCellParams:
         box_hi=[R + box_margin, R + box_margin, g["z_can"][1] + box_margin],
         wall_adhesion=s.wall_adhesion,
         # seed §3.3: walls are Hertz + damping (eq. 1's visco-elastic part): Coulomb mu only if asked
-        wall_friction=s.wall_friction, wall_mu=case.contact.friction if s.wall_friction else 0.0)
+        wall_friction=s.wall_friction, wall_mu=case.contact.friction if s.wall_friction else 0.0,
+        wall_friction_from=s2 if s.wall_friction == "shear" else 0)
 
 
 # ------------------------------------------------------------------------------------------------
