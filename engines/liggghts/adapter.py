@@ -88,12 +88,19 @@ class Liggghts(Engine):
                                  "γ_n = sqrt(4/3 E* m*) delivers, instead of force ∝ δ^1/2 δ̇",
         },
         "rolling_friction_load": {
-            "epsd2_constant": "rolling_friction epsd2 with a constant μ_rol = √(2 r_eff ξ) at the expected overlap",
+            "epsd2_constant": "rolling_friction epsd2 with a constant μ_rol = √(2 r_eff ξ) at the expected overlap; "
+                              "its spring is LIGGGHTS' Mindlin k_t(ξ) r_eff² (0.36 of the seed's k_t r_eff² at ξ_σ "
+                              "on the seed shear cell), no dashpot",
+            "epsd3_matched": "rolling_friction epsd3 with a constant μ_rol = √(2 r_eff ξ) at the expected overlap; "
+                             "its spring C k_n(ξ) μ_rol² r_eff² set to the seed's k_t r_eff² at contact.match_overlap, "
+                             "and the seed's critical dashpot for the median pair",
         },
         "torsion_friction": {
             "luding_torsion": "rolling_friction luding torsion on (same stiffness and μ as rolling)",
             "epsd2_torsion_torque": "rolling_friction epsd2 with torsionTorque on: the twist loads the rolling "
                                     "spring (same stiffness and limit as rolling, no separate mu_tor)",
+            "epsd3_torsion_torque": "rolling_friction epsd3 with torsionTorque on: the twist loads the rolling "
+                                    "spring (same stiffness, dashpot and limit as rolling, no separate mu_tor)",
         },
         "placed_clumps": {
             "inserted_clumps": "the library shapes as particletemplate/multisphere (mass and inertia from the "

@@ -12,8 +12,18 @@ Handed to the templates as ``engine`` (:meth:`engines.liggghts.adapter.Liggghts.
 - ``cohesion sjkr``: F = k A with the contact area A ≈ 2π r_eff ξ, so k = F_adh/(2π r_eff ξ_σ)
   gives the seed's pull-off at the overlap ξ_σ expected under the normal stress (substitute
   ``sjkr_matched_overlap``);
-- the decks realise ``adhesion`` and ``torsion_friction`` by one substitute each (the shear cell
-  and plane shear decks), and torsion (``epsd2 torsionTorque``) only together with rolling.
+- rolling: ``rolling_friction epsd2`` (substitute ``epsd2_constant``: its spring k_r = k_t(ξ) r_eff²
+  with LIGGGHTS' Mindlin k_t = 8 G* √(r_eff ξ), 0.36 of the seed's k_t r_eff² at ξ_σ on the seed
+  shear cell, and no dashpot; rolling_model_epsd2.h) or ``rolling_friction epsd3`` (substitute
+  ``epsd3_matched``: k_r = C k_n μ_r² r_eff² with LIGGGHTS' Hertz k_n = 4/3 E* √(r_eff ξ)
+  (normal_model_hertz.h), C = ``rollingStiffness`` set so that k_r is the seed's k_t r_eff² at the
+  matched overlap, and the dashpot η 2√(I_r k_r), I_r = 1.4 m* r*² of the pair, with η giving the
+  seed's 2√(k_r m_eff r_eff²) for the median pair; rolling_model_epsd3.h). The limit μ_r r_eff
+  |F_n| is the same in both;
+- the overlap-dependent stand-ins (sjkr's k, epsd3's C) are matched at ``contact.match_overlap``
+  x ξ_σ (default ξ_σ);
+- the decks realise ``adhesion`` by one substitute and ``torsion_friction`` by the rolling model's
+  ``torsionTorque`` (the twist loads the rolling spring), so torsion only together with rolling.
 """
 from __future__ import annotations
 
@@ -27,11 +37,17 @@ from orchestrator.params import Frozen, FrozenMap, Params, opt
 
 #: LIGGGHTS' ``coefficientRestitution`` must exceed 0.05 (global_properties.cpp)
 MIN_RESTITUTION_INPUT = 0.05
-#: the substitutes each scene's deck implements, by feature
+#: the substitutes each scene's deck implements, by feature (the first is the default)
 DECK_SUBSTITUTES = {
-    "shear_cell": {"adhesion": "sjkr_matched_overlap", "torsion_friction": "epsd2_torsion_torque"},
-    "plane_shear": {"torsion_friction": "epsd2_torsion_torque"},
+    "shear_cell": {"adhesion": ("sjkr_matched_overlap",),
+                   "rolling_friction_load": ("epsd2_constant", "epsd3_matched"),
+                   "torsion_friction": ("epsd2_torsion_torque", "epsd3_torsion_torque")},
+    "plane_shear": {"rolling_friction_load": ("epsd2_constant", "epsd3_matched"),
+                    "torsion_friction": ("epsd2_torsion_torque", "epsd3_torsion_torque")},
 }
+#: I_r / (m_eff r_eff²) for an equal pair in epsd3's dashpot: I_r = 1.4 (m r²)²/(2 m r²) = 0.7 m r²,
+#: m_eff r_eff² = (m/2)(r/2)² = m r²/8 (rolling_model_epsd3.h)
+EPSD3_INERTIA_RATIO = 0.7 * 8.0
 
 
 @dataclass(frozen=True)
@@ -46,6 +62,9 @@ class LiggghtsNumbers(Frozen):
                                                   "restitution (shear cell, plane shear)")
     contact_beta: float | None = opt("Tsuji β of that input [-]")
     cohesion_energy_density: float | None = opt("``cohesionEnergyDensity`` k of cohesion sjkr [J/m³]")
+    rolling_model: str | None = opt("``rolling_friction`` model: epsd2 or epsd3")
+    rolling_stiffness_coefficient: float | None = opt("epsd3 ``rollingStiffness`` C [-]: k_r = C k_n μ_r² r_eff²")
+    rolling_viscous_damping: float | None = opt("epsd3 ``coefficientRollingViscousDamping`` η [-]")
 
 
 def clipped_input(e_target: float) -> float:
@@ -78,47 +97,95 @@ def liggghts_numbers(case, params: Params) -> LiggghtsNumbers:
         ec = c.restitution.target
         ec_in = e_in if ec == e_target else restitution_input(ec)
         out.update(contact_restitution_input=ec_in, contact_beta=tsuji_beta(ec_in) if ec_in > 0 else -1.0)
+        xi_m = matched_overlap(case, c)
         if c.adhesion_force > 0:
-            # sjkr: F = k A, A ≈ 2 pi r_eff ξ; matched at the expected overlap
-            out["cohesion_energy_density"] = c.adhesion_force / (2 * math.pi * c.r_eff_mean * c.expected_overlap)
+            # sjkr: F = k A, A ≈ 2 pi r_eff ξ; matched at the matched overlap (ξ_σ unless the case says)
+            out["cohesion_energy_density"] = c.adhesion_force / (2 * math.pi * c.r_eff_mean * xi_m)
+        if c.rolling_coefficient is not None:
+            out.update(rolling_numbers(case, params, c, xi_m))
     return LiggghtsNumbers(restitution_input=e_in, beta=tsuji_beta(e_in) if e_in > 0 else -1.0,
                            low_restitution=low, hertz_stiffness=hs, **out)
 
 
+def matched_overlap(case, c) -> float | None:
+    """The overlap [m] at which LIGGGHTS' overlap-dependent stand-ins are matched: ``contact.match_overlap``
+    x ξ_σ (ξ_σ when the case leaves it out)."""
+    if c.expected_overlap is None:
+        return None
+    return c.expected_overlap * (case.contact.match_overlap or 1.0)
+
+
+def _chosen(case, feat: str) -> str | None:
+    subs = case.contact.substitutes
+    return subs.get(f"liggghts.{feat}", subs.get(feat))
+
+
+def rolling_numbers(case, params: Params, c, xi_m: float) -> dict:
+    """The rolling model and, for epsd3, C and η: k_r = C k_n(ξ_m) μ_r² r_eff² equals the seed's
+    k_t r_eff² (``rolling_stiffness``) for the median pair at the matched overlap ξ_m, with LIGGGHTS'
+    Hertz k_n = 4/3 E* √(r_eff ξ) (normal_model_hertz.h); η 2√(I_r k_r) equals the seed's
+    2√(k_r m_eff r_eff²) (seed 000 §3.2: every friction spring critically damped)."""
+    model = "epsd3" if _chosen(case, "rolling_friction_load") == "epsd3_matched" else "epsd2"
+    out = {"rolling_model": model}
+    if model == "epsd3":
+        kn = 4.0 / 3.0 * params.E_eff_pp * math.sqrt(c.r_eff_mean * xi_m)
+        out["rolling_stiffness_coefficient"] = c.rolling_stiffness / (kn * c.rolling_coefficient ** 2
+                                                                      * c.r_eff_mean ** 2)
+        out["rolling_viscous_damping"] = math.sqrt(1.0 / EPSD3_INERTIA_RATIO)
+    return out
+
+
 def _check_substitutes(case, params: Params) -> None:
     implemented = DECK_SUBSTITUTES.get(case.scene.kind, {})
-    subs = case.contact.substitutes
     c = case.contact
-    for feat, name in implemented.items():
-        chosen = subs.get(f"liggghts.{feat}", subs.get(feat))
-        if feat in params.features and chosen not in (None, name):
+    for feat, names in implemented.items():
+        chosen = _chosen(case, feat)
+        if feat in params.features and chosen not in (None, *names):
             raise DerivationError(f"contact.substitutes: the {case.scene.kind} scene's LIGGGHTS deck implements "
-                                  f"'{feat}' only as '{name}', not '{chosen}'")
+                                  f"'{feat}' only as {' or '.join(repr(n) for n in names)}, not '{chosen}'")
     if "torsion_friction" in implemented and "torsion_friction" in params.features and not (
             c.rolling is not None and (c.rolling.model == "seed000" or c.rolling.coefficient > 0)):
-        raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (epsd2 torsionTorque) needs rolling "
-                              "friction too; add contact.rolling")
+        raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (the rolling model's torsionTorque) "
+                              "needs rolling friction too; add contact.rolling")
+    roll, tors = _chosen(case, "rolling_friction_load"), _chosen(case, "torsion_friction")
+    if roll is not None and tors is not None and roll.split("_")[0] != tors.split("_")[0]:
+        raise DerivationError(f"contact.substitutes: LIGGGHTS' torsion rides on the rolling model, so "
+                              f"rolling_friction_load '{roll}' needs torsion_friction "
+                              f"'{roll.split('_')[0]}_torsion_torque', not '{tors}'")
 
 
 def seed_term_ratios(case, params: Params, xs) -> list:
-    """Engine.seed_term_ratios: sjkr adhesion k·A(ξ) (k matched at ξ_σ), the epsd2 rolling limit
-    μ_r r_eff |F| with μ_r frozen at ξ_σ, and epsd2's torsion sharing the rolling limit."""
+    """Engine.seed_term_ratios: sjkr adhesion k·A(ξ) (k matched at the matched overlap), the rolling
+    spring (epsd2: LIGGGHTS' k_t(ξ) r_eff²; epsd3: C k_n(ξ) μ_r² r_eff²) against the seed's k_t r_eff²,
+    the rolling limit μ_r r_eff |F| with μ_r frozen at ξ_σ, and the torsion sharing the rolling limit."""
     c = params.scene.contact
     R = case.scene.psd.median / 2
     r_eff = R / 2
     xs = np.asarray(xs, float)
     rows = []
-    k = liggghts_numbers(case, params).cohesion_energy_density
+    num = liggghts_numbers(case, params)
+    at = "ξ_σ" if not case.contact.match_overlap else f"{case.contact.match_overlap:g} ξ_σ"
+    k = num.cohesion_energy_density
     if k is not None:
         d = 2 * R - xs
         area = np.abs(np.pi / 4 * ((d - 2 * R) * d * d * (d + 2 * R)) / d ** 2)   # sphere-intersection disc
-        rows.append(("adhesion", "sjkr k·A(ξ), k matched at ξ_σ", list(k * area / c.adhesion_force)))
+        rows.append(("adhesion", f"sjkr k·A(ξ), k matched at {at}", list(k * area / c.adhesion_force)))
     if c.rolling_coefficient is not None:
+        model = num.rolling_model
+        if c.rolling_stiffness:
+            if model == "epsd3":
+                kr = (num.rolling_stiffness_coefficient * 4.0 / 3.0 * params.E_eff_pp * np.sqrt(r_eff * xs)
+                      * c.rolling_coefficient ** 2 * r_eff ** 2)
+                label = f"epsd3 C k_n(ξ) μ_r² r_eff², matched at {at}"
+            else:
+                kr = 8.0 * params.G_eff_pp * np.sqrt(r_eff * xs) * r_eff ** 2
+                label = "epsd2 k_t(ξ) r_eff² (LIGGGHTS' Mindlin k_t)"
+            rows.append(("rolling stiffness", label, list(kr / c.rolling_stiffness)))
         lever_seed = np.sqrt(2 * r_eff * xs)
-        rows.append(("rolling limit", "epsd2 μ_r r_eff |F| (μ_r frozen at ξ_σ)",
+        rows.append(("rolling limit", f"{model} μ_r r_eff |F| (μ_r frozen at ξ_σ)",
                      list(c.rolling_coefficient * r_eff / lever_seed)))
     if c.torsion_coefficient is not None and c.rolling_coefficient is not None:
         lever_seed = c.torsion_coefficient * r_eff
-        rows.append(("torsion limit", "epsd2 torsion shares the rolling limit",
+        rows.append(("torsion limit", f"{num.rolling_model} torsion shares the rolling limit",
                      [c.rolling_coefficient * r_eff / lever_seed] * len(xs)))
     return rows
