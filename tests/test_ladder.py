@@ -107,6 +107,16 @@ def test_smoke_ladder_l0_on_both_engines(tmp_path):
         assert Path(res.files[f]).exists()
 
 
+def test_one_engine_has_nothing_to_compare_and_no_verdict():
+    """A ladder of one engine (its rungs run ahead of the others') used to stop with KeyError."""
+    from orchestrator.compare.ladder import plot_ladder
+    runs = pd.DataFrame(_runs("L2", "liggghts", [0.33]) + _runs("L4", "liggghts", [0.44]))
+    res = compare_rungs(runs, ["L2", "L4"])
+    assert len(res.comparison) == 0 and "observable" in res.comparison.columns
+    assert res.parts_at is None
+    plot_ladder(res)
+
+
 def test_ladder_plot_has_a_panel_per_engine_pair():
     from orchestrator.compare.ladder import plot_ladder
     runs = pd.DataFrame(_runs("L0", "lammps", [0.31]) + _runs("L0", "liggghts", [0.33]) + _runs("L0", "yade", [0.34])

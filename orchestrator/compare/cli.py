@@ -96,8 +96,12 @@ def cmd_ladder(args, con) -> int:
         con.width = max(con.width, 150)       # a log keeps every column whole
     con.print(t)
     one_seed = bool(len(res.comparison)) and res.comparison["significant"].isna().all()
-    con.print(f"engines part at: {res.parts_at or 'no rung (every difference within its floor or the scatter)'}"
-              + (" (one seed per engine: no scatter, the floors alone decide)" if one_seed else ""))
+    if not len(res.comparison):
+        con.print("one engine ran: no pair to compare (its runs are in ladder_runs.csv; run the other engines "
+                  "with the same --runs to compare them)")
+    else:
+        con.print(f"engines part at: {res.parts_at or 'no rung (every difference within its floor or the scatter)'}"
+                  + (" (one seed per engine: no scatter, the floors alone decide)" if one_seed else ""))
     if len(res.explanation):
         con.print(res.explanation.to_string(index=False))
     con.print("wrote " + ", ".join(res.files.values()))

@@ -243,7 +243,9 @@ def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
                              f"mean B": rb["mean"] if obs != "density_profile" else np.nan,
                              "relative difference": diff, "scatter (2 sem, relative)": scatter,
                              "significant": significant, "floor": floor, "ok": ok})
-    comp = pd.DataFrame(rows)
+    # the columns even without a pair (one engine: its runs and statistics, nothing to compare yet)
+    comp = pd.DataFrame(rows, columns=["rung", "engines", "observable", "mean A", "mean B", "relative difference",
+                                       "scatter (2 sem, relative)", "significant", "floor", "ok"])
     parts = None
     for rung in rung_order:
         sel = comp[(comp["rung"] == rung)] if len(comp) else comp
@@ -329,7 +331,8 @@ def plot_ladder(res: LadderResult):
             ax.axvline(x[res.parts_at], color="k", ls=":", lw=1)
         ax.set_title(pair, fontsize=9)
     axes[0][0].set_ylabel("|A − B| / mean [%]")
-    axes[0][-1].legend(fontsize=7)
+    if axes[0][-1].get_legend_handles_labels()[0]:
+        axes[0][-1].legend(fontsize=7)
     fig.suptitle(f"cross-validation ladder: {res.case}"
                  + (f" (engines part at {res.parts_at})" if res.parts_at else ""), fontsize=10)
     return fig
