@@ -117,6 +117,29 @@ def test_one_engine_has_nothing_to_compare_and_no_verdict():
     plot_ladder(res)
 
 
+def test_a_ladder_run_rung_by_rung_accumulates_into_one_table(tmp_path):
+    """A second invocation (one more rung or engine) used to overwrite ladder_runs.csv with its own
+    rows only; now the earlier rows whose runs still exist stay, and a rung run again replaces its row."""
+    from orchestrator.compare.ladder import merge_earlier_runs
+    kept, gone, redone = (tmp_path / n for n in ("kept", "gone", "redone"))
+    kept.mkdir(), redone.mkdir()
+    old = pd.DataFrame([
+        {"rung": "L0", "engine": "yade", "seed": 1, "status": "complete", "run_dir": str(kept), "mu_macro": 0.34,
+         "density_profile": [0.1, 0.2]},
+        {"rung": "L0", "engine": "lammps", "seed": 1, "status": "complete", "run_dir": str(gone), "mu_macro": 0.31,
+         "density_profile": [0.1, 0.2]},
+        {"rung": "L3", "engine": "liggghts", "seed": 1, "status": "complete", "run_dir": str(redone),
+         "mu_macro": 0.50, "density_profile": [0.1, 0.2]}])
+    csv = tmp_path / "ladder_runs.csv"
+    csv.write_text(old.to_csv(index=False))
+    new = pd.DataFrame([{"rung": "L3", "engine": "liggghts", "seed": 1, "status": "complete",
+                         "run_dir": str(redone), "mu_macro": 0.54, "density_profile": [0.3, 0.4]}])
+    merged = merge_earlier_runs(new, csv)
+    assert sorted(zip(merged.rung, merged.engine, merged.mu_macro)) == [("L0", "yade", 0.34), ("L3", "liggghts", 0.54)]
+    assert list(merged[merged.engine == "yade"]["density_profile"].iloc[0]) == [0.1, 0.2]
+    compare_rungs(merged, ["L0", "L3"])          # the re-read profiles are lists again
+
+
 def test_ladder_plot_has_a_panel_per_engine_pair():
     from orchestrator.compare.ladder import plot_ladder
     runs = pd.DataFrame(_runs("L0", "lammps", [0.31]) + _runs("L0", "liggghts", [0.33]) + _runs("L0", "yade", [0.34])

@@ -149,13 +149,33 @@ def run_ladder(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", sched
                 progress(rows[k])
     finally:
         ex.close()
-    runs = pd.DataFrame(rows)
-    res = compare_rungs(runs, [r.name for r, _ in todo])
+    out_dir = Path(out_dir) if out_dir else Path(runs_root) / case.name / "ladder"
+    runs = merge_earlier_runs(pd.DataFrame(rows), out_dir / "ladder_runs.csv")
+    order = [r.name for r in RUNGS if r.name in set(runs["rung"])]
+    res = compare_rungs(runs, order)
     res.case = case.name
     res.explanation = explain(case_path, res.parts_at, runs)
-    out_dir = Path(out_dir) if out_dir else Path(runs_root) / case.name / "ladder"
     res.files = write_ladder(res, out_dir)
     return res
+
+
+def merge_earlier_runs(runs: pd.DataFrame, earlier_csv: Path) -> pd.DataFrame:
+    """This invocation's runs plus the rows of an earlier ``ladder_runs.csv`` of the same ladder for
+    (rung, engine, seed) not run now and whose run directory still exists: a ladder run one rung or
+    one engine at a time accumulates into one table instead of replacing it."""
+    earlier_csv = Path(earlier_csv)
+    if not earlier_csv.exists():
+        return runs
+    old = pd.read_csv(earlier_csv)
+    if "density_profile" in old.columns:
+        old["density_profile"] = [json.loads(v) if isinstance(v, str) else v for v in old["density_profile"]]
+    done = set(zip(runs["rung"], runs["engine"], runs["seed"].astype(int)))
+    keep = [i for i, r in old.iterrows()
+            if (r["rung"], r["engine"], int(r["seed"])) not in done
+            and isinstance(r["run_dir"], str) and Path(r["run_dir"]).is_dir()]
+    if not keep:
+        return runs
+    return pd.concat([old.loc[keep], runs], ignore_index=True)
 
 
 def _stats(runs: pd.DataFrame) -> pd.DataFrame:
