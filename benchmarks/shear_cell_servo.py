@@ -3,8 +3,9 @@
 
     python benchmarks/shear_cell_servo.py gains                  # G per shipped case (I_c speed, capped)
     python benchmarks/shear_cell_servo.py series RUN_DIR         # F/F_target from the wall series
-    python benchmarks/shear_cell_servo.py probe RUN_DIR STEP     # LIGGGHTS: 400 steps from restart STEP,
-                                                                 # the force printed every step
+    python benchmarks/shear_cell_servo.py probe RUN_DIR STEP [S] # LIGGGHTS: 400 steps from restart STEP,
+                                                                 # the force printed every step (servo
+                                                                 # speed limit x S)
 
 ``gains``: the loop gain G = v_max kp γ_w/F_c of the servo against the dashpots of the grains it
 pushes (scenes/shear_cell.py ``servo_dashpot_gain``; plane shear: scenes/plane_shear.py), at the
@@ -74,8 +75,10 @@ def series(run: Path) -> None:
               f"range {ratio[sh].min():.3f}-{ratio[sh].max():.3f}")
 
 
-def probe(run: Path, start: int, steps: int = 400) -> None:
+def probe(run: Path, start: int, steps: int = 400, vmax_scale: float = 1.0) -> None:
     deck = (run / "deck.in").read_text().splitlines()
+    if vmax_scale != 1.0:       # the servo's speed limit scaled: where does the limit cycle stop?
+        deck = [_scaled_vmax(l, vmax_scale) if l.startswith("fix lower") else l for l in deck]
     first = next(i for i, l in enumerate(deck) if l.startswith(f"read_restart    restart/state.{start}.restart"))
     begin = max(i for i in range(first) if deck[i].startswith("atom_style"))
     end = next(i for i in range(first, len(deck)) if deck[i].startswith("fix_modify lower integrate start"))
@@ -93,10 +96,17 @@ def probe(run: Path, start: int, steps: int = 400) -> None:
                        stdout=subprocess.DEVNULL)
         p = np.loadtxt(t / "probe.txt", comments="#", ndmin=2)
     f = -p[:, 2] / F_t
-    print(f"{run.name}: {len(p)} steps from {start}: F/F_target every step, first 10: "
+    print(f"{run.name}: {len(p)} steps from {start} (v_max x {vmax_scale:g}): F/F_target every step, first 10: "
           + " ".join(f"{x:.2f}" for x in f[:10]))
     print(f"  mean {f.mean():.3f}, min {f.min():.3f}, max {f.max():.3f}; piston z range {np.ptp(p[:, 1]) * 1e9:.1f} nm; "
           f"sign changes of the step-to-step force change: {int(np.sum(np.diff(np.sign(np.diff(f))) != 0))}")
+
+
+def _scaled_vmax(line: str, scale: float) -> str:
+    words = line.split()
+    i = words.index("vel_max")
+    words[i + 1] = repr(float(words[i + 1]) * scale)
+    return " ".join(words)
 
 
 def main(argv=None) -> int:
@@ -106,8 +116,8 @@ def main(argv=None) -> int:
     elif args[:1] == ["series"] and len(args) >= 2:
         for r in args[1:]:
             series(Path(r))
-    elif args[:1] == ["probe"] and len(args) == 3:
-        probe(Path(args[1]), int(args[2]))
+    elif args[:1] == ["probe"] and len(args) in (3, 4):
+        probe(Path(args[1]), int(args[2]), vmax_scale=float(args[3]) if len(args) == 4 else 1.0)
     else:
         print(__doc__, file=sys.stderr)
         return 2

@@ -67,7 +67,7 @@ def run(tmp_path, visco_elastic: bool, roll: bool = False) -> dict:
     gamma = F_ADH / (4 * math.pi * R / 2)       # DMT F = 4 pi gamma r_eff, r_eff = R/2 for the pair
     contact = {"restitution": {"target": 1.0, "from": "elastic"}}
     p = {"material": {"E": E, "nu": NU, "rho": RHO}, "friction": math.tan(0.5), "wall": {"nu": NU},
-         "scene": {"contact": contact, "wall_adhesion": False, "wall_mu": 0.0}}
+         "scene": {"contact": contact, "wall_adhesion": False, "wall_mu": 0.0, "wall_friction_from": 0}}
     engine = {"contact_restitution_input": 1.0, "wall_young": E, "gamma": gamma, "eta": 0.1, "krot": 1e-9,
               "ktwist": 1e-9}
     text = environment().from_string(SCRIPT).render(
