@@ -165,3 +165,25 @@ def test_yade_walls_frictional_gives_coulomb_sliding(tmp_path):
     assert after[-1, 1] > 5 / 7 * V0
     assert r["new_mu"] == pytest.approx(MU, rel=1e-12)
     assert np.tan(r["wall_angle"]) == pytest.approx(MU, rel=1e-12)
+
+
+def test_servo_slows_for_frictional_walls_in_shear(tmp_path):
+    """With Coulomb friction at the walls the grains on the piston's axial faces add their tangential
+    dashpots to the servo's loop (the medium case's shear stage swung every step at 1.48 x its target
+    load, docs/validation.md): the shear stage's speed limit keeps the frictional gain at 0.7."""
+    from orchestrator.contact_law import SERVO_DASHPOT_GAIN
+    from orchestrator.scenes.shear_cell import frictional_wall_gain_factor, servo_dashpot_gain
+    case = load_case(REPO / "cases" / "shear_cell_medium_wall_friction.yaml")
+    sv = derive(case)["scene"]["servo"]
+    frictionless = load_case(REPO / "cases" / "shear_cell_medium.yaml")
+    assert sv["v_max"] == derive(frictionless)["scene"]["servo"]["v_max"]       # compression unchanged
+    factor = frictional_wall_gain_factor(case)
+    assert factor > 1
+    gain = servo_dashpot_gain(case, sv["v_max_shear"], case.scene.servo_gain) * factor
+    assert gain == pytest.approx(SERVO_DASHPOT_GAIN, rel=1e-9)
+    assert sv["v_max_shear"] < sv["v_max"]
+    smoke = _case("shear")
+    assert "fix_modify lower vel_max" in _deck(smoke, "liggghts", tmp_path)
+    assert "servo.maxVelocity = " in _deck(smoke, "yade", tmp_path / "y")
+    assert "*(step>" in [ln for ln in _deck(smoke, "lammps", tmp_path / "m").splitlines()
+                         if ln.startswith("variable        vz")][0]

@@ -38,7 +38,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..atomic import write_json
 from ..case import Strict, positive
-from ..contact_law import (dashpot_stable_servo_speed, effective_modulus, remembered,
+from ..contact_law import (dashpot_stable_servo_speed, effective_modulus, effective_shear_modulus, remembered,
                            wall_dashpot_coefficient)
 from ..derive import adhesion_force, DerivationError
 from ..numerics import multiple_of
@@ -247,17 +247,43 @@ def servo_dashpot_gain(case, v_max: float, kp: float) -> float:
     return v_max * kp * gamma / Fc
 
 
-def _v_max(case, g=None) -> float:
+def frictional_wall_gain_factor(case, g=None) -> float:
+    """The servo's loop gain with Coulomb friction at the walls over the frictionless one [-]:
+    1 + (γ_t/γ_n) A_axial/A_face. Moving along the axis, the lower piston slides past the grains on
+    its axial faces (the six vanes' sides, 2 h_v (r_out - r_in) each, and the plate's rim, 2π R_p t_p),
+    whose tangential dashpots (with friction, while they stick) add to the axial force as the normal
+    dashpots of the grains on its face (π R_p²) do, with as many contacts per area. γ_t/γ_n =
+    √(S_t/S_n) = √(4 G*/E*) for Tsuji's dashpots on Hertz-Mindlin (LIGGGHTS normal_model_hertz.h:
+    gammat, gamman). Probed on the medium case (docs/validation.md): at the speed limit that holds
+    the frictionless loop at G = 0.7 the frictional one swung at G ≈ 1.4-1.5 (growing swings at 0.75
+    of that speed, G ≈ 1.1; settling at 0.5, successive swings 0.7 of each other), where this factor
+    (2.63 there) predicts 1.84: conservative by ~25 %, the rim's contacts in the gap counted in full."""
+    s = case.scene
+    g = g or geometry_numbers(case)
+    mat = case.material
+    Ew, nuw = case.wall_moduli()
+    E_w = effective_modulus(mat.youngs_modulus, mat.poisson_ratio, Ew, nuw)
+    G_w = effective_shear_modulus(mat.youngs_modulus, mat.poisson_ratio, Ew, nuw)
+    axial = 6 * 2 * s.vane_height * (g["vane_outer"] - g["vane_inner_radius"]) \
+        + 2 * math.pi * g["R_piston"] * s.plate_thickness
+    return 1.0 + math.sqrt(4 * G_w / E_w) * axial / g["piston_area"]
+
+
+def _v_max(case, g=None, frictional: bool = False) -> float:
     """Servo speed limit [m/s]: from the compression inertial number I_c = (v_max/h) x50 √(ρ/σ),
     capped so that the servo's loop gain against its contacts' dashpots stays at
     :data:`..contact_law.SERVO_DASHPOT_GAIN` (:func:`servo_dashpot_gain`; the cap binds on tall cells, whose
-    I_c-speed is high)."""
+    I_c-speed is high); ``frictional``: with Coulomb friction at the walls, whose tangential dashpots
+    add to the gain (:func:`frictional_wall_gain_factor`)."""
     s = case.scene
     g = g or geometry_numbers(case)
     rho = case.material.density
     rate = s.compression_inertial_number / (s.psd.median * math.sqrt(rho / s.normal_stress))
     v = rate * g["h_dense_estimate"]
-    return dashpot_stable_servo_speed(v, servo_dashpot_gain(case, v, s.servo_gain))
+    gain = servo_dashpot_gain(case, v, s.servo_gain)
+    if frictional:
+        gain *= frictional_wall_gain_factor(case, g)
+    return dashpot_stable_servo_speed(v, gain)
 
 
 def max_velocity(case) -> float:
@@ -326,7 +352,7 @@ class ShearCellParams(ScenePart):
     gamma_visc: float            #: relaxation drag γ, F = -γ v [N s/m]
     relax_tau_steps: int         #: relaxation time m50/γ [steps]
     m50: float                   #: mass of a median grain [kg]
-    servo: dict                  #: target_force [N], v_max [m/s], kp [-], tau [s], E_bulk_estimate [Pa], travel_time [s]
+    servo: dict                  #: target_force [N], v_max, v_max_shear [m/s], kp [-], tau [s], E_bulk_estimate [Pa], travel_time [s]
     omega: float                 #: angular velocity of the rotating parts [rad/s]
     rotation_period: float       #: 2π/ω [s]
     quasi_static_number: float   #: ω √(ρ x50²/σ) [-]
@@ -358,7 +384,9 @@ def derive(case, common: Params) -> ShearCellParams:
     gamma_visc = m50 / (tau_steps * dt)                         # N s/m, F = -gamma v
     n_relax = int(math.ceil(s.relax_damping_times * tau_steps))
     # ---- stage 2: compression
-    v_max = _v_max(case, g)
+    v_max = _v_max(case, g, frictional=s.wall_friction is True)
+    # the shear stage's limit: lower when the walls become frictional there (wall_friction: shear)
+    v_max_shear = _v_max(case, g, frictional=bool(s.wall_friction))
     F_target = s.normal_stress * g["piston_area"]
     E_pp = common.E_eff_pp
     # bulk modulus of a Hertz packing under σ: E_b ~ (E*² σ)^(1/3) (effective-medium scaling)
@@ -428,7 +456,8 @@ def derive(case, common: Params) -> ShearCellParams:
         dump_every=max(1, s3), restart_every=multiple_of(max(1000, s3 // 10), wall_every), wall_every=wall_every,
         average_window_steps=max(wall_every, int(math.ceil(s.average_window * n_settle))),
         gamma_visc=gamma_visc, relax_tau_steps=tau_steps, m50=m50,
-        servo={"target_force": F_target, "v_max": v_max, "kp": s.servo_gain, "tau": tau_servo,
+        servo={"target_force": F_target, "v_max": v_max, "v_max_shear": v_max_shear, "kp": s.servo_gain,
+               "tau": tau_servo,
                "E_bulk_estimate": E_bulk, "travel_time": t_travel},
         omega=omega, rotation_period=2 * math.pi / omega,
         quasi_static_number=omega * math.sqrt(rho * x50 ** 2 / s.normal_stress),
