@@ -129,6 +129,14 @@ class Scene(Strict):
     _pos = positive("cell_diameter", "gap", "vane_thickness", "plate_thickness", "fill_height", "normal_stress",
                      "final_angle")
 
+    @field_validator("wall_friction", mode="before")
+    @classmethod
+    def _wall_friction(cls, v):
+        if isinstance(v, bool) or v == "shear":
+            return v
+        raise ValueError("write true (Coulomb friction at the walls for the whole run), false (none, seed §3.3) "
+                         "or shear (from the start of the shear stage)")
+
     @model_validator(mode="after")
     def _check(self):
         if self.psd.d_max >= self.cell_diameter or self.psd.d_max >= self.fill_height:
