@@ -243,6 +243,9 @@ def _scene_union():
 
 class Case(Strict):
     """A simulation case. Everything in SI after loading."""
+    #: (section, field) added after runs existed, whose default (None) leaves every deck as it was:
+    #: not hashed at that default, so the runs made before them keep their hash (and resume)
+    _UNHASHED_AT_DEFAULT: ClassVar[tuple] = (("contact", "match_overlap"),)
     name: str
     description: str = ""
     engines: list[str] = Field(default_factory=lambda: list(engine_names()))
@@ -317,10 +320,9 @@ class Case(Strict):
         d.pop("description", None)
         d.get("engine_options", {}).pop("progress", None)
         d.get("engine_options", {}).pop("timeout", None)
-        # fields added later whose default leaves every deck as it was: not hashed at that default,
-        # so the runs made before them keep their hash (and resume)
-        if d.get("contact", {}).get("match_overlap", 0) is None:
-            d["contact"].pop("match_overlap")
+        for section, field in self._UNHASHED_AT_DEFAULT:
+            if field in d.get(section, {}) and d[section][field] is None:
+                d[section].pop(field)
         return json.dumps(d, sort_keys=True)
 
 

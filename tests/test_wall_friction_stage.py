@@ -24,7 +24,7 @@ import pytest
 
 from engines import get_engine
 from engines.render import environment
-from orchestrator.case import load_case
+from orchestrator.case import CaseError, load_case
 from orchestrator.derive import derive
 from orchestrator.runner import prepare, run_case
 
@@ -45,7 +45,7 @@ def test_wall_friction_from_is_the_shear_stage_start():
 
 
 def test_bad_wall_friction_is_refused():
-    with pytest.raises(Exception, match="wall_friction"):
+    with pytest.raises(CaseError, match="wall_friction"):
         _case("compress")
 
 

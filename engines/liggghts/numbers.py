@@ -45,6 +45,9 @@ DECK_SUBSTITUTES = {
     "plane_shear": {"rolling_friction_load": ("epsd2_constant", "epsd3_matched"),
                     "torsion_friction": ("epsd2_torsion_torque", "epsd3_torsion_torque")},
 }
+#: the rolling model each rolling or torsion substitute runs on (torsion rides on the rolling spring)
+SUBSTITUTE_ROLLING_MODEL = {"epsd2_constant": "epsd2", "epsd3_matched": "epsd3",
+                            "epsd2_torsion_torque": "epsd2", "epsd3_torsion_torque": "epsd3"}
 #: I_r / (m_eff r_eff²) for an equal pair in epsd3's dashpot: I_r = 1.4 (m r²)²/(2 m r²) = 0.7 m r²,
 #: m_eff r_eff² = (m/2)(r/2)² = m r²/8 (rolling_model_epsd3.h)
 EPSD3_INERTIA_RATIO = 0.7 * 8.0
@@ -120,15 +123,27 @@ def _chosen(case, feat: str) -> str | None:
     return subs.get(f"liggghts.{feat}", subs.get(feat))
 
 
+def hertz_kn(E_eff: float, r_eff: float, xi: float):
+    """LIGGGHTS' ``model hertz`` normal stiffness k_n = 4/3 E* √(r_eff ξ) [N/m] (normal_model_hertz.h;
+    F_n = k_n ξ), the k_n epsd3's spring C k_n μ_r² r_eff² scales with. ``xi`` may be an array."""
+    return 4.0 / 3.0 * E_eff * np.sqrt(r_eff * xi)
+
+
+def rolling_model(case) -> str:
+    """The rolling model the case's LIGGGHTS deck runs: epsd2 unless ``rolling_friction_load:
+    epsd3_matched``."""
+    return SUBSTITUTE_ROLLING_MODEL[_chosen(case, "rolling_friction_load") or "epsd2_constant"]
+
+
 def rolling_numbers(case, params: Params, c, xi_m: float) -> dict:
     """The rolling model and, for epsd3, C and η: k_r = C k_n(ξ_m) μ_r² r_eff² equals the seed's
     k_t r_eff² (``rolling_stiffness``) for the median pair at the matched overlap ξ_m, with LIGGGHTS'
     Hertz k_n = 4/3 E* √(r_eff ξ) (normal_model_hertz.h); η 2√(I_r k_r) equals the seed's
     2√(k_r m_eff r_eff²) (seed 000 §3.2: every friction spring critically damped)."""
-    model = "epsd3" if _chosen(case, "rolling_friction_load") == "epsd3_matched" else "epsd2"
+    model = rolling_model(case)
     out = {"rolling_model": model}
     if model == "epsd3":
-        kn = 4.0 / 3.0 * params.E_eff_pp * math.sqrt(c.r_eff_mean * xi_m)
+        kn = float(hertz_kn(params.E_eff_pp, c.r_eff_mean, xi_m))
         out["rolling_stiffness_coefficient"] = c.rolling_stiffness / (kn * c.rolling_coefficient ** 2
                                                                       * c.r_eff_mean ** 2)
         out["rolling_viscous_damping"] = math.sqrt(1.0 / EPSD3_INERTIA_RATIO)
@@ -147,11 +162,13 @@ def _check_substitutes(case, params: Params) -> None:
             c.rolling is not None and (c.rolling.model == "seed000" or c.rolling.coefficient > 0)):
         raise DerivationError("contact.torsion: LIGGGHTS' torsion substitute (the rolling model's torsionTorque) "
                               "needs rolling friction too; add contact.rolling")
-    roll, tors = _chosen(case, "rolling_friction_load"), _chosen(case, "torsion_friction")
-    if roll is not None and tors is not None and roll.split("_")[0] != tors.split("_")[0]:
+    tors = _chosen(case, "torsion_friction")
+    if "torsion_friction" in params.features and tors in SUBSTITUTE_ROLLING_MODEL \
+            and SUBSTITUTE_ROLLING_MODEL[tors] != rolling_model(case):
+        roll = _chosen(case, "rolling_friction_load") or "epsd2_constant"
         raise DerivationError(f"contact.substitutes: LIGGGHTS' torsion rides on the rolling model, so "
                               f"rolling_friction_load '{roll}' needs torsion_friction "
-                              f"'{roll.split('_')[0]}_torsion_torque', not '{tors}'")
+                              f"'{rolling_model(case)}_torsion_torque', not '{tors}'")
 
 
 def seed_term_ratios(case, params: Params, xs) -> list:
@@ -174,7 +191,7 @@ def seed_term_ratios(case, params: Params, xs) -> list:
         model = num.rolling_model
         if c.rolling_stiffness:
             if model == "epsd3":
-                kr = (num.rolling_stiffness_coefficient * 4.0 / 3.0 * params.E_eff_pp * np.sqrt(r_eff * xs)
+                kr = (num.rolling_stiffness_coefficient * hertz_kn(params.E_eff_pp, r_eff, xs)
                       * c.rolling_coefficient ** 2 * r_eff ** 2)
                 label = f"epsd3 C k_n(ξ) μ_r² r_eff², matched at {at}"
             else:
