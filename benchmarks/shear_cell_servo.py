@@ -37,8 +37,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def gains() -> None:
-    print("| case | v_max from I_c [m/s] | G there | v_max used [m/s] | G used |")
-    print("|---|---|---|---|---|")
+    print("| case | v_max from I_c [m/s] | G there | v_max used [m/s] | G used | frictional walls: gain factor, "
+          "v_max in shear [m/s] |")
+    print("|---|---|---|---|---|---|")
     for path in sorted((REPO / "cases").glob("shear_cell_*.yaml")) + sorted((REPO / "cases").glob("plane_shear_*.yaml")):
         case = load_case(path)
         s = case.scene
@@ -50,8 +51,10 @@ def gains() -> None:
         else:
             mod = plane_shear
             v_ic = s.compression_inertial_number * plane_shear.geometry(case)["H_dense"] / plane_shear._time_scale(case)
+        fw = (f"{shear_cell.frictional_wall_gain_factor(case):.2f}, {sv['v_max_shear']:.4g}"
+              if s.kind == "shear_cell" and s.wall_friction else "")
         print(f"| {path.stem} | {v_ic:.4g} | {mod.servo_dashpot_gain(case, v_ic, sv['kp']):.2f} | {sv['v_max']:.4g} | "
-              f"{mod.servo_dashpot_gain(case, sv['v_max'], sv['kp']):.2f} |")
+              f"{mod.servo_dashpot_gain(case, sv['v_max'], sv['kp']):.2f} | {fw} |")
 
 
 def series(run: Path) -> None:

@@ -151,6 +151,18 @@ def report(run: Path) -> dict:
             out["K_nonaffine_over_U_loading_median"] = float(np.median(kn[load]))
             out["K_nonaffine_over_U_loading_max"] = float(np.max(kn[load]))
     out["series_figures"] = series_figures(run)
+    curves = run / "analysis" / "triaxial_curves.csv"
+    if curves.exists():
+        # the 10-row mean of σ1/σ3 over the plateau ε_a = 5-15 % (mean and std in time: how much one run
+        # wanders, the scale a one-seed engine difference is judged on) and where it peaks
+        import pandas as pd
+        d = pd.read_csv(curves)
+        m = (d["axial_strain"] >= 0.05) & (d["axial_strain"] <= 0.15)
+        if m.any():
+            out["plateau_stress_ratio_5_15"] = [float(d.loc[m, "stress_ratio_smoothed"].mean()),
+                                                float(d.loc[m, "stress_ratio_smoothed"].std())]
+        i = d["stress_ratio_smoothed"].idxmax()
+        out["peak_stress_ratio_smoothed_at"] = [float(d["stress_ratio_smoothed"][i]), float(d["axial_strain"][i])]
     if (run / "frames.h5").exists() and (run / "case.yaml").exists():
         from orchestrator.case import load_case
         from orchestrator.stability.observables import observables

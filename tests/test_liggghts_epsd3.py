@@ -139,6 +139,8 @@ def test_epsd3_rolling_spring_and_dashpot_are_the_seeds(tmp_path):
     A = np.column_stack([r["theta"], r["w_rel"]])
     (k, damp), *_ = np.linalg.lstsq(A[1:], -r["tq1"][1:], rcond=None)
     m_eff, r_eff = r["m"] / 2, c.r_eff_mean
+    c_seed = 2 * math.sqrt(r["k_seed"] * m_eff * r_eff ** 2)
+    print(f"epsd3 matched: k_r {k / r['k_seed']:.3f}, dashpot {damp / c_seed:.3f} of the seed's")   # docs/crossval.md
     assert k == pytest.approx(r["k_seed"], rel=0.02)
     assert damp == pytest.approx(2 * math.sqrt(r["k_seed"] * m_eff * r_eff ** 2), rel=0.02)
 
