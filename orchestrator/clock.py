@@ -19,8 +19,10 @@ Model (per engine and scene, fitted from completed runs)::
 
 Where a scene decides its step count while it runs (:meth:`orchestrator.scenes.base.Scene.step_plan`:
 the triaxial's stage 1 goes on chunk by chunk until the stresses converge), ``steps`` is not the
-derived budget (every chunk allowed) but ``fixed + unit · u`` with ``u`` the median number of units
-the engine's measured runs of the scene took (``units`` in the table; the budget until measured).
+derived budget (every chunk allowed) but ``fixed`` plus the median length of the variable part the
+engine's measured runs of the scene took, in the scene's time scale of that part (``units`` in the
+table: the triaxial's stage 1 in pressure-ramp lengths), rounded up to whole chunks (the budget
+until measured).
 
 ``a`` and ``b`` come from a non-negative least-squares fit of the loop time per step against n
 over the stored runs of one engine and scene (scipy.optimize.nnls). One run fixes only the sum:
@@ -63,7 +65,8 @@ class Throughput:
     parallel_efficiency: float = ASSUMED_PARALLEL_EFFICIENCY
     runs: int = 0
     note: str = ""
-    #: median units (StepPlan) the runs took, e.g. stage-1 chunks of a triaxial [-]; None: not measured
+    #: median units (StepPlan) the runs took, e.g. a triaxial's stage 1 in pressure-ramp lengths [-];
+    #: None: not measured
     units: float | None = None
 
     def engine_time(self, n_particles: int, steps: int, ranks: int = 1) -> float:
@@ -92,8 +95,8 @@ class RunSample:
         (e.g. a triaxial whose stage 1 ran out of chunks and skipped the drag ramp)."""
         if self.plan is None:
             return None
-        u = self.plan.units_of(self.steps)
-        return u if 0.5 <= u <= self.plan.max_units + 0.5 else None
+        k = self.plan.chunks_of(self.steps)
+        return self.plan.units_of(self.steps) if 0.5 <= k <= self.plan.max_units + 0.5 else None
 
 
 def package_table_path() -> Path:

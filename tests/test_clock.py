@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from orchestrator.clock import RunSample, Throughput, estimate_engine_time, fit, load_table, refresh
+from orchestrator.clock import RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, refresh
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -159,10 +159,40 @@ def test_triaxial_estimate_takes_the_chunks_measured_runs_took(tmp_path, monkeyp
     table = tmp_path / "throughput.json"
     monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(table))
     fitted = refresh([runs], table)["yade"]["triaxial"]
-    assert fitted.units == pytest.approx(12.0) and fitted.runs == 4
+    # stage 1 counted in pressure-ramp lengths, not chunks (a chunk is two loading frame intervals)
+    assert plan.scale == params["scene"]["iso"]["ramp_steps"] > 0
+    assert fitted.units == pytest.approx(12.0 * plan.unit / plan.scale) and fitted.runs == 4
     case = load_case("cases/triaxial_smoke.yaml")
     size = estimate(case, derive(case), "yade")
     assert size["steps"] == params["scene"]["total_steps"] == plan.fixed + plan.max_units * plan.unit
     assert size["steps_expected"] == plan.fixed + 12 * plan.unit
     assert size["engine_time_s"] == pytest.approx(fitted.engine_time(300, size["steps_expected"]))
     assert size["engine_time_s"] < 0.7 * fitted.engine_time(300, size["steps"])
+
+
+def test_stage_one_is_learned_in_its_own_time_scale_not_in_chunks():
+    """The triaxial's chunk is two frame intervals of the loading: halving the loading rate doubles
+    it, while stage 1 (compression at the stage's own inertial number) takes as long as before. The
+    clock counts stage 1 in pressure-ramp lengths, so a case loading at half the rate is estimated
+    with the same stage-1 steps (LIGGGHTS, 2 000 grains: 114 000 steps in 15 chunks of 7 600 at
+    I = 2.5e-3, 106 400 in 7 of 15 200 at 1.25e-3; counted in chunks the clock put the second at
+    1.36x its engine time, docs/validation.md)."""
+    from orchestrator.case import load_case
+    from orchestrator.clock import Throughput
+    from orchestrator.derive import derive
+    from orchestrator.registry import get_scene
+    scene = get_scene("triaxial")
+    fast = derive(load_case("cases/triaxial_smoke.yaml")).to_dict()["scene"]
+    case = load_case("cases/triaxial_smoke.yaml")
+    slow_case = case.model_copy(update={"scene": case.scene.model_copy(
+        update={"inertial_number": case.scene.inertial_number / 2})})
+    slow = derive(slow_case).to_dict()["scene"]
+    p_fast, p_slow = scene.step_plan(fast), scene.step_plan(slow)
+    assert p_slow.unit > 1.9 * p_fast.unit and p_slow.scale == p_fast.scale     # chunk doubles, ramp does not
+    stage1 = 12 * p_fast.unit                               # the measured run: 12 chunks at the fast rate
+    tp = Throughput(0.0, 0.0, 1e-6, units=p_fast.units_of(p_fast.fixed + stage1))
+    est_slow = expected_steps(10**9, p_slow, tp) - p_slow.fixed
+    assert est_slow % p_slow.unit == 0 and stage1 <= est_slow < stage1 + p_slow.unit   # same length, whole chunks
+    # counted in chunks (scale 0) the slow case would be given 12 of its chunks: about twice the stage
+    in_chunks = type(p_slow)(p_slow.fixed, p_slow.unit, p_slow.max_units)
+    assert expected_steps(10**9, in_chunks, Throughput(0.0, 0.0, 1e-6, units=12.0)) - p_slow.fixed > 1.9 * stage1

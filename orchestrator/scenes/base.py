@@ -57,22 +57,41 @@ class EngineOutput(Protocol):
 @dataclass(frozen=True)
 class StepPlan:
     """The step count of a run that is decided while it runs (e.g. a stage that goes on until a
-    test passes): ``steps = fixed + unit * units`` with ``1 <= units <= max_units`` [steps, -].
-    The derived ``steps`` budget is the largest, ``fixed + unit * max_units``; the clock
-    (:mod:`orchestrator.clock`) estimates with the units the engine's measured runs of the scene
-    took."""
+    test passes): ``steps = fixed + unit * k`` with ``1 <= k <= max_units`` chunks of ``unit``
+    steps [steps, -]. The derived ``steps`` budget is the largest, ``fixed + unit * max_units``.
+
+    The clock (:mod:`orchestrator.clock`) estimates with the length of the variable part the
+    engine's measured runs of the scene took, counted in ``scale`` steps (the scene's physical time
+    scale of that part; 0: in chunks). A chunk is often tied to something else (the triaxial's is
+    two frame intervals of the loading, so halving the loading rate doubles it) while the variable
+    part is not: counted in chunks, a frictionless-prepared 2 000-grain triaxial converged in 7
+    chunks of 15 200 steps and a frictional one in 15 of 7 600, 106 400 against 114 000 steps, 6.9
+    and 7.4 pressure-ramp lengths (docs/validation.md)."""
     fixed: int
     unit: int
     max_units: int
+    #: steps per learned unit (the variable part's physical time scale) [steps]; 0: the chunk ``unit``
+    scale: int = 0
 
-    def units_of(self, steps_run: int) -> float:
-        """How many units a run of ``steps_run`` steps took [-]."""
+    @property
+    def _per_unit(self) -> int:
+        return int(self.scale) if self.scale and self.scale > 0 else int(self.unit)
+
+    def chunks_of(self, steps_run: int) -> float:
+        """How many chunks of ``unit`` steps a run of ``steps_run`` steps took [-]."""
         return (steps_run - self.fixed) / self.unit
 
+    def units_of(self, steps_run: int) -> float:
+        """How many units (``scale`` steps, or chunks) the variable part of a run of ``steps_run``
+        steps took [-]."""
+        return (steps_run - self.fixed) / self._per_unit
+
     def steps(self, units: float) -> int:
-        """Steps of a run taking ``units`` units, rounded up (a step or two past a unit boundary, as
-        YADE's last step, is not a unit more) and clipped to [1, max_units] [-]."""
-        k = min(max(math.ceil(units - 0.01), 1), self.max_units)
+        """Steps of a run whose variable part takes ``units`` units: rounded up to whole chunks (a
+        step or two past a chunk boundary, as YADE's last step, is not a chunk more) and clipped to
+        [1, max_units] chunks [-]."""
+        chunks = units * self._per_unit / self.unit
+        k = min(max(math.ceil(chunks - 0.01), 1), self.max_units)
         return self.fixed + self.unit * k
 
 

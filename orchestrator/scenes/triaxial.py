@@ -517,10 +517,13 @@ def _sample_size_uncached(case):
 def step_plan(scene_params) -> base.StepPlan:
     """Stage 1 goes on chunk by chunk until the stresses are within tolerance (at most
     ``iso.max_chunks`` chunks; the drag ramp's chunks and the loading are fixed): the step count
-    a run takes is ``drag_ramp_steps + shear_steps + chunk * (chunks it took)``."""
+    a run takes is ``drag_ramp_steps + shear_steps + chunk * (chunks it took)``. The clock counts
+    stage 1 in lengths of the pressure ramp (``iso.ramp_steps``, the compression time scale at the
+    stage's inertial number): the chunk is two frame intervals of the loading, not a stage-1 time."""
     iso = scene_params["iso"]
     return base.StepPlan(fixed=int(iso["drag_ramp_steps"]) + int(scene_params["shear_steps"]),
-                         unit=int(iso["chunk"]), max_units=int(iso["max_chunks"]))
+                         unit=int(iso["chunk"]), max_units=int(iso["max_chunks"]),
+                         scale=int(iso.get("ramp_steps") or 0))
 
 
 def stability_inputs(case, params) -> StabilityInputs:
