@@ -44,6 +44,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from orchestrator.attempts import AttemptRecord
 from orchestrator.resources import templates_dir
 
 FEATURES = (
@@ -208,9 +209,11 @@ class Engine(ABC):
 
     # -- running ---------------------------------------------------------------------------
     def run(self, deck: Path, case, total_steps: int, log: Path, timeout: float,
-            progress: bool = True, env: dict | None = None) -> RunResult:
+            progress: bool = True, env: dict | None = None, first_step: int = 0) -> RunResult:
         """Run the engine on ``deck`` in its directory, streaming output into ``log``, with a
         progress bar fed by the engine's step counter, a wall-clock ``timeout`` [s] and a kill.
+        The attempt's steps (from ``first_step``, the resume point) and engine time go into the run
+        directory's ``attempts.json`` as it runs (:mod:`orchestrator.attempts`).
         Raises :class:`EngineError` with the log's last lines on failure."""
         cmd = self.command(deck, case)
         run_dir = deck.parent
@@ -225,6 +228,7 @@ class Engine(ABC):
             proc = subprocess.Popen(cmd, cwd=run_dir, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                     env=full_env, start_new_session=True, preexec_fn=_die_with_parent)
             bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress)
+            attempt = AttemptRecord(run_dir, first_step, self.workers(case))
             try:
                 sel = selectors.DefaultSelector()
                 sel.register(proc.stdout, selectors.EVENT_READ)
@@ -239,6 +243,7 @@ class Engine(ABC):
                         if _reap(proc, 0.0, usage):
                             break
                         bar.update(step)            # a quiet engine (setup, a long stage) still gets its lines
+                        attempt.update(step, proc.pid)
                         continue
                     chunk = os.read(proc.stdout.fileno(), 65536)
                     if not chunk:
@@ -252,6 +257,7 @@ class Engine(ABC):
                         if s is not None:
                             step = s
                             bar.update(step)
+                    attempt.update(step, proc.pid)
                 if not _reap(proc, 30.0, usage):
                     raise subprocess.TimeoutExpired(cmd, 30.0)
             except BaseException:
@@ -259,6 +265,8 @@ class Engine(ABC):
                 raise
             finally:
                 bar.close()
+                attempt.close(step, usage[0] if usage else None,
+                              done=proc.returncode == 0 and not timed_out)
         wall = time.perf_counter() - t0
         res = RunResult(proc.returncode if proc.returncode is not None else -9, wall, step, log, timed_out,
                         extra={"cpu_s": usage[0]} if usage else {})

@@ -10,6 +10,9 @@ Model (per engine and scene, fitted from completed runs)::
   (``wall_time.engine_cpu``, from ``os.wait4``), its wall time otherwise: on a shared machine the
   wall time grows with the load, a single process's CPU time does not (MPI ranks poll while they
   wait, so several ranks' CPU time grows with the load too: their wall time is kept);
+- a run that was killed and resumed counts with the engine time of all its attempts
+  (:mod:`orchestrator.attempts`: CPU time on one rank, each attempt's repeated steps taken out),
+  or not at all when that record is incomplete (runs from before it existed);
 - ``a`` [s/step]: cost per step independent of the particle count (mesh walls, servo and wall
   computes, Python callbacks in YADE decks, dumps amortised over the run);
 - ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration);
@@ -45,6 +48,7 @@ import numpy as np
 import yaml
 
 from .atomic import write_text
+from .attempts import read_attempts, run_cost
 
 from .resources import data_file
 
@@ -157,8 +161,8 @@ def _sample(run_dir: Path) -> RunSample | None:
         p = json.loads((run_dir / "params.json").read_text())
     except (OSError, ValueError):
         return None
-    if s.get("status") != "complete" or s.get("resumed_from"):
-        return None          # a resumed run's engine time covers only its last part
+    if s.get("status") != "complete":
+        return None
     wt = s.get("wall_time") or {}
     if not isinstance(wt.get("engine"), (int, float)):
         return None
@@ -181,6 +185,14 @@ def _sample(run_dir: Path) -> RunSample | None:
     # the engine's own loop time where its log gives one (0 or absent: not measured, e.g. YADE's)
     loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
         else engine_s
+    startup = max(engine_s - loop, 0.0)
+    if s.get("resumed_from"):
+        # the summary's engine time covers only the last attempt: the record of every attempt
+        # (orchestrator.attempts) gives the whole run's, or the run does not count
+        cost = run_cost(s.get("attempts") or read_attempts(run_dir), steps, use_cpu=ranks == 1)
+        if cost is None:
+            return None
+        return RunSample(s["engine"], kind, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan)
     cpu = wt.get("engine_cpu")
     if isinstance(cpu, (int, float)) and cpu > 0 and ranks == 1:
         # a one-rank engine's CPU time stands for its wall time on a quiet machine: the wall time of a
@@ -188,7 +200,6 @@ def _sample(run_dir: Path) -> RunSample | None:
         # time is not. Not so on several MPI ranks: a rank polls while it waits for one the load has
         # descheduled (the default case, 2 ranks: 201 s quiet; beside a YADE run 636 s wall and
         # 806 s CPU, 403 s per rank), so their wall time is kept
-        startup = max(engine_s - loop, 0.0)
         engine_s = min(float(cpu) / ranks, engine_s)
         loop = engine_s - startup if startup < engine_s else engine_s
     return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir), plan)

@@ -23,6 +23,7 @@ from engines.base import EngineError
 from engines.render import templates_hash
 
 from .atomic import write_json, write_text
+from .attempts import clear_attempts, read_attempts
 from .case import Case, case_from_dict
 from .derive import derive
 from .sizing import estimate_wall_time
@@ -284,6 +285,9 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     timings["parse"] = time.perf_counter() - t2
     summary["status"] = "complete"
     summary["steps_run"] = res.steps
+    if summary.get("resumed_from"):
+        # the engine time of every attempt (the clock's figure for a resumed run, orchestrator.attempts)
+        summary["attempts"] = read_attempts(run_dir)
     if analyze and case.analysis:
         t3 = time.perf_counter()
         summary["analysis"] = run_case_analyses(case, run_dir)
@@ -357,11 +361,15 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
     total = params["scene"].get("total_steps", params["scene"]["steps"])
     timeout = case.engine_options.timeout
     candidates = (resume or {}).get("candidates", [])
-    if resume is None and hasattr(eng, "prepare_resume"):
-        eng.prepare_resume(run_dir, {"step": -1})           # a fresh start: no frame segment of an older try
+    if resume is None:
+        clear_attempts(run_dir)                             # a fresh start: the engine time starts at 0
+        if hasattr(eng, "prepare_resume"):
+            eng.prepare_resume(run_dir, {"step": -1})       # no frame segment of an older try
     for cand in candidates[1:] + [None]:
         try:
-            return eng.run(deck, case, total, log, timeout, progress), resume
+            # the step the attempt starts from (None: the resume point does not say, e.g. YADE's checkpoint)
+            first = 0 if resume is None else resume.get("step")
+            return eng.run(deck, case, total, log, timeout, progress, first_step=first), resume
         except EngineError:
             if resume is None:
                 raise
@@ -369,6 +377,8 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress):
             resume = None if cand is None else dict(resume, restart_file=cand, checkpoint=cand,
                                                     step=_restart_step(cand, resume))
             resume = _scene_resume(case, eng.name, run_dir, resume)
+            if resume is None:
+                clear_attempts(run_dir)
             if hasattr(eng, "prepare_resume"):
                 eng.prepare_resume(run_dir, resume or {"step": -1})
             deck = eng.render(case, params, run_dir, resume=resume)

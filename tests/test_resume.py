@@ -2,6 +2,8 @@
 ends with the same frames as an uninterrupted run."""
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 import time
@@ -10,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from orchestrator.attempts import run_cost
+from orchestrator.clock import samples_from_runs
 from orchestrator.frames import Frames
 from resume_util import kill_run, rerun_resumes
 
@@ -39,7 +43,8 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
     case = long_case(tmp_path, engine)
     runs = tmp_path / "runs"
     proc = subprocess.Popen(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
-                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "ORCHESTRATOR_ATTEMPT_EVERY": "0.2"})
     restarts = engine in ("liggghts", "lammps")
     marker = "restart/state.*.restart" if restarts else "checkpoint.yade.gz"
     t0 = time.time()
@@ -55,6 +60,15 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
     kill_run(proc, run_dir)
     rerun_resumes(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
                   run_dir, timeout=600)
+    # the engine time of both attempts is on record, and the clock counts the resumed run with it
+    summary = json.loads((run_dir / "summary.json").read_text())
+    att = summary["attempts"]
+    assert len(att) == 2 and att[0]["first_step"] == 0 and not att[0]["done"] and att[1]["done"]
+    assert 0 < att[0]["last_step"] and 0 < att[1]["first_step"] < att[1]["last_step"] == summary["steps_run"]
+    assert all(a["wall_s"] > 0 and a["cpu_s"] > 0 for a in att)
+    cost = run_cost(att, summary["steps_run"], use_cpu=True)
+    assert cost is not None and cost > 0          # (run_cost's arithmetic: tests/test_attempts.py)
+    assert samples_from_runs([run_dir])[0].engine_s == pytest.approx(cost)
 
     ref_runs = tmp_path / "ref"
     ref = subprocess.run(orchestrator("run", str(case), "--engine", engine, "--runs", str(ref_runs), "--quiet"),

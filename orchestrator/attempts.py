@@ -1,0 +1,173 @@
+"""The engine time of every attempt at a run, so that a run that was killed and resumed still tells
+the clock (:mod:`orchestrator.clock`) what it cost.
+
+A run that resumes from a checkpoint used to drop out of the run-time model: its summary's engine
+time covers only the last attempt. The long runs (medium cases, hours) are exactly the ones that
+get interrupted, and exactly the ones the model needs. While the engine runs, ``attempts.json`` in
+the run directory holds one entry per attempt, rewritten every :attr:`AttemptRecord.EVERY` seconds
+(5; atomically; a SIGKILL loses at most that much)::
+
+    {"first_step": 101680, "last_step": 236160, "wall_s": 1933.0, "cpu_s": 1911.2, "ranks": 1,
+     "done": false}
+
+``cpu_s`` is the CPU time (user + system) of the engine's whole process group, read from
+``/proc/<pid>/stat`` while it runs (fields 14-17, clock ticks; a rank that exited is counted in its
+parent's ``cutime``), and the ``os.wait4`` figure once it is reaped. A fresh start clears the file.
+
+:func:`run_cost` turns the record into the engine time an uninterrupted run would have taken: each
+attempt's time scaled by the share of its steps that were new (a resume repeats the steps since the
+checkpoint), summed; ``None`` when the record does not cover the run from step 0 without a gap.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+from .atomic import write_json
+
+__all__ = ["AttemptRecord", "read_attempts", "run_cost", "clear_attempts", "FILE"]
+
+#: the record's file name in a run directory
+FILE = "attempts.json"
+
+_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
+def read_attempts(run_dir) -> list[dict]:
+    """The attempts recorded in ``run_dir`` (oldest first); [] when none or unreadable."""
+    try:
+        data = json.loads((Path(run_dir) / FILE).read_text())
+    except (OSError, ValueError):
+        return []
+    return data if isinstance(data, list) else []
+
+
+def clear_attempts(run_dir) -> None:
+    """Forget the attempts of an earlier try (a fresh start)."""
+    try:
+        (Path(run_dir) / FILE).unlink()
+    except FileNotFoundError:
+        pass
+
+
+def session_cpu_seconds(sid: int) -> float | None:
+    """CPU time (user + system, with reaped children) [s] of every live process of session ``sid``
+    (the engine is started in its own session, so its ranks and helpers are all there); None
+    without /proc."""
+    total = 0
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return None
+    for name in entries:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", "rb") as f:
+                stat = f.read().decode(errors="replace")
+        except OSError:
+            continue                                      # exited meanwhile
+        fields = stat[stat.rfind(")") + 2:].split()       # after "(comm)": state is field 3
+        try:
+            if int(fields[3]) != sid:                     # field 6: session id
+                continue
+            total += sum(int(x) for x in fields[11:15])   # fields 14-17: utime stime cutime cstime
+        except (IndexError, ValueError):
+            continue
+    return total / _TICKS
+
+
+class AttemptRecord:
+    """Keeps this attempt's entry of ``run_dir/attempts.json`` up to date (see the module
+    docstring). ``update`` is cheap to call often: it writes every :attr:`EVERY` seconds."""
+
+    #: seconds between two writes of the record (ORCHESTRATOR_ATTEMPT_EVERY overrides it, e.g. for a
+    #: test that kills a run after a few seconds); a write scans /proc once, well under a millisecond
+    EVERY = float(os.environ.get("ORCHESTRATOR_ATTEMPT_EVERY", "5"))
+
+    def __init__(self, run_dir, first_step: int | None, ranks: int = 1):
+        """``first_step``: the step the attempt starts from (0 for a fresh start); None when the
+        resume point does not say (YADE's checkpoint): the first step the engine reports, later by
+        at most one progress interval."""
+        self.path = Path(run_dir) / FILE
+        self.t0 = time.perf_counter()
+        self.next = self.t0 + self.EVERY
+        first = None if first_step is None else int(first_step)
+        self.entry = {"first_step": first, "last_step": first, "wall_s": 0.0,
+                      "cpu_s": None, "ranks": int(ranks), "done": False}
+        self.earlier = read_attempts(run_dir)
+        self._write()
+
+    def _write(self) -> None:
+        try:
+            write_json(self.path, self.earlier + [self.entry])
+        except OSError:            # a full disk must not kill the run it describes
+            pass
+
+    def _note(self, step: int) -> None:
+        if not step:
+            return
+        if self.entry["first_step"] is None:
+            self.entry["first_step"] = int(step)
+        self.entry["last_step"] = max(self.entry["last_step"] or 0, int(step))
+
+    def update(self, step: int, sid: int | None = None, force: bool = False) -> None:
+        """Note the engine's current ``step`` and, every EVERY seconds, write the record with the
+        wall time and the CPU time of session ``sid`` so far."""
+        self._note(step)
+        now = time.perf_counter()
+        if not force and now < self.next:
+            return
+        self.next = now + self.EVERY
+        self.entry["wall_s"] = now - self.t0
+        if sid is not None:
+            cpu = session_cpu_seconds(sid)
+            if cpu is not None:
+                self.entry["cpu_s"] = cpu
+        self._write()
+
+    def close(self, step: int, cpu_s: float | None, done: bool) -> None:
+        """The attempt ended at ``step`` with the engine's reaped CPU time ``cpu_s`` [s]; ``done``:
+        the engine finished the run."""
+        self._note(step)
+        self.entry["wall_s"] = time.perf_counter() - self.t0
+        if cpu_s is not None:
+            self.entry["cpu_s"] = float(cpu_s)
+        self.entry["done"] = bool(done)
+        self._write()
+
+
+#: largest gap between two attempts' recorded steps [fraction of the run] that counts as covered
+#: (an attempt's record lags its engine by up to EVERY seconds; a resume without a stated step is
+#: first seen at the engine's first progress line); its time is taken at the next attempt's rate
+GAP_TOLERANCE = 0.02
+
+
+def run_cost(attempts: list[dict], steps_run: int, use_cpu: bool) -> float | None:
+    """Engine time [s] an uninterrupted run of ``steps_run`` steps would have taken, from the record
+    of its attempts: each attempt's CPU time (``use_cpu``, where recorded) or wall time, times the
+    share of its steps that were new, summed (a gap of up to :data:`GAP_TOLERANCE` of the run
+    between two attempts counted at the later one's rate). None when the record does not start at
+    step 0, leaves a larger gap, stops short of ``steps_run`` by more than that, or has an attempt
+    without time."""
+    if not attempts or attempts[0].get("first_step") != 0 or steps_run <= 0:
+        return None
+    reached, total = 0, 0.0
+    for a in attempts:
+        first, last = a.get("first_step"), a.get("last_step")
+        if first is None and last is None:
+            continue                     # killed before its first step: start-up an uninterrupted run has once
+        t = a.get("cpu_s") if use_cpu and a.get("cpu_s") else a.get("wall_s")
+        if not isinstance(first, int) or not isinstance(last, int) or not isinstance(t, (int, float)) or t <= 0:
+            return None
+        if first - reached > GAP_TOLERANCE * steps_run:
+            return None
+        if last > first:
+            rate = t / (last - first)
+            total += rate * (max(last - reached, 0) if first <= reached else (last - first) + (first - reached))
+        reached = max(reached, last)
+    if reached < (1 - GAP_TOLERANCE) * steps_run:
+        return None
+    return total

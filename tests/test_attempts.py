@@ -1,0 +1,85 @@
+"""The engine time of a killed and resumed run, from the record of its attempts
+(orchestrator.attempts): what the clock fits a resumed run with."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from orchestrator.attempts import AttemptRecord, read_attempts, run_cost, session_cpu_seconds
+
+
+def _a(first, last, t, done=False):
+    return {"first_step": first, "last_step": last, "wall_s": t, "cpu_s": t / 2, "ranks": 1, "done": done}
+
+
+def test_one_attempt_is_its_own_time():
+    assert run_cost([_a(0, 1000, 10.0, True)], 1000, use_cpu=False) == pytest.approx(10.0)
+    assert run_cost([_a(0, 1000, 10.0, True)], 1000, use_cpu=True) == pytest.approx(5.0)
+
+
+def test_repeated_steps_are_taken_out():
+    """Killed at 600 after a checkpoint at 400: the second attempt repeats 400-600, which an
+    uninterrupted run would not have done (its rate: 600 steps in 6 s)."""
+    cost = run_cost([_a(0, 600, 6.0), _a(400, 1000, 6.0, True)], 1000, use_cpu=False)
+    assert cost == pytest.approx(6.0 + 6.0 * 400 / 600)
+
+
+def test_a_small_gap_is_bridged_at_the_next_rate_and_a_large_one_is_not():
+    """The record lags the engine by up to one write interval, and a YADE resume is first seen at
+    its first progress line: a gap of up to 2 % of the run counts at the next attempt's rate."""
+    ok = run_cost([_a(0, 490, 4.9), _a(500, 1000, 5.0, True)], 1000, use_cpu=False)
+    assert ok == pytest.approx(4.9 + 5.0 * 510 / 500)
+    assert run_cost([_a(0, 400, 4.0), _a(500, 1000, 5.0, True)], 1000, use_cpu=False) is None
+
+
+@pytest.mark.parametrize("attempts, steps", [
+    ([], 1000),                                            # no record (a run from before it existed)
+    ([_a(100, 1000, 9.0, True)], 1000),                    # the record does not start at step 0
+    ([_a(0, 500, 5.0)], 1000),                             # stops half-way
+    ([_a(0, 500, 0.0), _a(500, 1000, 5.0, True)], 1000),   # an attempt without time
+])
+def test_an_incomplete_record_gives_no_figure(attempts, steps):
+    assert run_cost(attempts, steps, use_cpu=False) is None
+
+
+def test_an_attempt_killed_before_its_first_step_adds_nothing():
+    att = [_a(0, 500, 5.0), {"first_step": None, "last_step": None, "wall_s": 3.0, "cpu_s": 1.0, "done": False},
+           _a(500, 1000, 5.0, True)]
+    assert run_cost(att, 1000, use_cpu=False) == pytest.approx(10.0)
+
+
+def test_the_record_follows_a_real_process(tmp_path, monkeypatch):
+    """A process group burning CPU: the record holds its session's CPU time while it runs, and the
+    second attempt is appended to the first."""
+    monkeypatch.setattr(AttemptRecord, "EVERY", 0.0)
+    burn = "import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3: pass\ntime.sleep(5)\n"
+    proc = subprocess.Popen([sys.executable, "-c", burn], start_new_session=True)
+    try:
+        rec = AttemptRecord(tmp_path, 0)
+        deadline = 0
+        while deadline < 100:
+            rec.update(1234, proc.pid)
+            if (rec.entry["cpu_s"] or 0) >= 0.3:
+                break
+            deadline += 1
+            subprocess.run(["sleep", "0.05"])
+        assert 0.3 <= read_attempts(tmp_path)[0]["cpu_s"] < 2.0
+        assert session_cpu_seconds(proc.pid) >= 0.3
+    finally:
+        proc.kill()
+        proc.wait()
+    rec.close(2000, 0.31, done=False)
+    AttemptRecord(tmp_path, None).close(3000, 0.2, done=True)
+    att = json.loads((tmp_path / "attempts.json").read_text())
+    assert [(a["first_step"], a["last_step"], a["done"]) for a in att] == [(0, 2000, False), (3000, 3000, True)]
+    assert oct(os.stat(tmp_path / "attempts.json").st_mode & 0o777) == oct(0o666 & ~_umask())
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
