@@ -30,6 +30,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from .attempts import run_cost
+
 __all__ = ["KeyResult", "key_results", "format_measure", "results_frame"]
 
 
@@ -194,10 +196,19 @@ def key_results(run_dir) -> list[KeyResult]:
         est = summary.get("estimated_engine_time_s")
         note = f"estimated {est:.0f} s before the run" if isinstance(est, (int, float)) else ""
         resumed = summary.get("resumed_from") or {}
-        if isinstance(resumed, dict) and resumed.get("step") is not None:
-            # the engine time covers only the part after the restart: say so beside both figures
-            note = (f"resumed from step {resumed['step']}: this part only"
-                    + (f"; the whole run was {note}" if note else ""))
+        if resumed:
+            # the summary's engine time covers only the last attempt; the record of every attempt
+            # (orchestrator.attempts) gives the whole run's, with the steps a resume repeated taken out
+            attempts = summary.get("attempts") or []
+            whole = run_cost(attempts, int(summary.get("steps_run") or 0), use_cpu=False)
+            start = resumed.get("step") if isinstance(resumed, dict) else None
+            where = f"resumed from step {start}" if start is not None else "resumed"
+            if whole is not None:
+                note = (f"the whole run, {len(attempts)} attempts (the last, {where}, {wt:.0f} s)"
+                        + (f"; {note}" if note else ""))
+                wt = whole
+            else:          # no complete record (a run from before it existed)
+                note = f"{where}: this part only" + (f"; the whole run was {note}" if note else "")
         rows.append(KeyResult("engine time", float(wt), "s", None, "", note))
     return rows
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import pandas as pd
 import yaml
 
@@ -65,6 +66,15 @@ def test_engine_time_of_a_resumed_run_says_it_covers_only_the_last_part(tmp_path
     assert rows["engine time"].value == 200.0
     assert rows["engine time"].seed == ("resumed from step 235750: this part only; the whole run was estimated "
                                         "180 s before the run")
+    # with the record of every attempt (orchestrator.attempts): the whole run's engine time
+    s["steps_run"] = 400000
+    s["attempts"] = [{"first_step": 0, "last_step": 240000, "wall_s": 120.0, "cpu_s": 110.0, "done": False},
+                     {"first_step": 235750, "last_step": 400000, "wall_s": 200.0, "cpu_s": 190.0, "done": True}]
+    (run / "summary.json").write_text(json.dumps(s))
+    rows = {r.quantity: r for r in key_results(run)}
+    assert rows["engine time"].value == pytest.approx(120.0 + 200.0 * 160000 / 164250)
+    assert rows["engine time"].seed == ("the whole run, 2 attempts (the last, resumed from step 235750, 200 s); "
+                                        "estimated 180 s before the run")
 
 
 def test_no_band_is_said_not_hidden(tmp_path):
