@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.attempts import run_cost
+from orchestrator.attempts import read_attempts, run_cost
 from orchestrator.clock import samples_from_runs
 from orchestrator.frames import Frames
 from resume_util import kill_run, rerun_resumes
@@ -44,7 +44,7 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
     runs = tmp_path / "runs"
     proc = subprocess.Popen(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env={**os.environ, "ORCHESTRATOR_ATTEMPT_EVERY": "0.2"})
+                            env={**os.environ, "ORCHESTRATOR_ATTEMPT_EVERY": "0"})
     restarts = engine in ("liggghts", "lammps")
     marker = "restart/state.*.restart" if restarts else "checkpoint.yade.gz"
     t0 = time.time()
@@ -57,6 +57,12 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
         assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
         time.sleep(0.2)
     assert run_dir is not None, "no restart written within 120 s"
+    if restarts:        # kill once the attempt record has reached the newest restart (it follows the progress lines)
+        newest = max(int(p.name.split(".")[1]) for p in run_dir.glob("restart/state.*.restart"))
+        while time.time() - t0 < 120 and proc.poll() is None and \
+                max((a.get("last_step") or 0 for a in read_attempts(run_dir)), default=0) < newest:
+            time.sleep(0.05)
+        assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
     kill_run(proc, run_dir)
     rerun_resumes(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
                   run_dir, timeout=600)
