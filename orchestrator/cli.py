@@ -121,13 +121,13 @@ def cmd_clock(args) -> int:
         n = sum(tp.runs for scenes in fitted.values() for tp in scenes.values())
         con.print(f"fitted {sum(len(v) for v in fitted.values())} engine/scene model(s) from {n} complete run(s); "
                   f"wrote {out}")
-    t = Table(title="run-time model: t = startup + steps (a + b n) / (1 + e (workers - 1))")
-    for col in ("engine", "scene", "startup [s]", "a [µs/step]", "b [ns/(particle step)]", "e", "runs", "note"):
+    t = Table(title="run-time model: t = startup + steps (a + b n^α) / (1 + e (workers - 1))")
+    for col in ("engine", "scene", "startup [s]", "a [µs/step]", "b [ns/(particle^α step)]", "α", "e", "runs", "note"):
         t.add_column(col)
     for eng, scenes in sorted(load_table().items()):
         for sc, tp in sorted(scenes.items()):
             t.add_row(eng, sc, f"{tp.startup_s:.2f}", f"{tp.per_step_s * 1e6:.1f}", f"{tp.per_particle_step_s * 1e9:.1f}",
-                      f"{tp.parallel_efficiency:.2f}", str(tp.runs), tp.note)
+                      f"{tp.exponent:.2f}", f"{tp.parallel_efficiency:.2f}", str(tp.runs), tp.note)
     con.print(t)
     return 0
 

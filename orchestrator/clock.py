@@ -2,7 +2,7 @@
 
 Model (per engine and scene, fitted from completed runs)::
 
-    t_engine = t_start + steps · (a + b · n) / S(ranks)
+    t_engine = t_start + steps · (a + b · n^α) / S(ranks)
 
 - ``t_start`` [s]: process start-up and set-up (reading the packing and meshes, building the
   neighbour structures, the first dump), measured as engine time minus the engine's own loop time;
@@ -15,7 +15,9 @@ Model (per engine and scene, fitted from completed runs)::
   or not at all when that record is incomplete (runs from before it existed);
 - ``a`` [s/step]: cost per step independent of the particle count (mesh walls, servo and wall
   computes, Python callbacks in YADE decks, dumps amortised over the run);
-- ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration);
+- ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration); ``α`` = 1, unless
+  runs of three sizes or more fit a power law ``b·n^α`` (``a`` = 0) better than the line: the
+  LIGGGHTS shear cell's cost per step grows as n^0.8 from 228 to 14 107 grains;
 - ``S(ranks)`` = 1 + e (ranks − 1): the speed-up on several MPI ranks (LIGGGHTS) or threads (YADE),
   with parallel efficiency ``e`` fitted from runs on more than one rank (0.7 until measured, stated
   as ``assumed``).
@@ -72,11 +74,18 @@ class Throughput:
     #: median units (StepPlan) the runs took, e.g. a triaxial's stage 1 in pressure-ramp lengths [-];
     #: None: not measured
     units: float | None = None
+    #: α of the per-particle term b·n^α [-]: 1 (linear) unless runs of three or more sizes fitted a
+    #: power law better (then a = 0 and b is in s/(step·particle^α))
+    exponent: float = 1.0
+
+    def step_time(self, n_particles: int) -> float:
+        """One rank's time per step [s] with ``n_particles``."""
+        return self.per_step_s + self.per_particle_step_s * max(n_particles, 1) ** self.exponent
 
     def engine_time(self, n_particles: int, steps: int, ranks: int = 1) -> float:
         """Predicted engine wall time [s] of ``steps`` steps with ``n_particles`` on ``ranks``."""
         speedup = 1.0 + self.parallel_efficiency * (max(int(ranks), 1) - 1)
-        return self.startup_s + steps * (self.per_step_s + self.per_particle_step_s * max(n_particles, 1)) / speedup
+        return self.startup_s + steps * self.step_time(n_particles) / speedup
 
 
 @dataclass(frozen=True)
@@ -150,7 +159,7 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         return (tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
                 f"measured on {tp.runs} {engine} {scene} run(s)")
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
-        tp = max(scenes.values(), key=lambda t: t.per_particle_step_s + t.per_step_s / max(n_particles, 1))
+        tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
         return tp.engine_time(n_particles, steps, ranks), f"no {scene} run measured on {engine}: slowest other scene"
     return float("nan"), f"no throughput measured for {engine}"
 
@@ -236,6 +245,24 @@ def samples_from_runs(paths) -> list[RunSample]:
     return out
 
 
+def _size_group_counts(ns: np.ndarray) -> np.ndarray:
+    """For each run, how many runs share its size group [-]: counts within a factor 1.5 of the
+    group's smallest (a packing's count drifts by a few grains with the seed) are one size."""
+    order = np.argsort(ns)
+    group = np.empty(len(ns), int)
+    g, lo = -1, None
+    for i in order:
+        if lo is None or ns[i] > 1.5 * lo:
+            g, lo = g + 1, ns[i]
+        group[i] = g
+    return np.bincount(group)[group].astype(float)
+
+
+def _n_groups(ns: np.ndarray) -> int:
+    """How many sizes the counts make (counts within a factor 1.5 are one size) [-]."""
+    return int(round(np.sum(1.0 / _size_group_counts(ns))))
+
+
 def fit(samples: list[RunSample]) -> Throughput:
     """Fit one engine+scene's cost model to its runs (see the module docstring)."""
     if not samples:
@@ -251,11 +278,27 @@ def fit(samples: list[RunSample]) -> Throughput:
     # counts within a factor 1.5 of each other (a packing's count drifts by a few grains with the
     # seed) cannot separate the per-step from the per-particle cost: they count as one size
     sizes = len(set(ns.tolist())) if ns.max() / ns.min() >= 1.5 else 1
+    alpha = 1.0
     if sizes >= 2:
         A = np.column_stack([np.ones_like(ns), ns])
         from scipy.optimize import nnls       # here: not needed to read the table (validate, #16)
         (a, b), _ = nnls(A / tps[:, None], np.ones_like(tps))       # relative residuals
         note = f"{sizes} sizes"
+        counts = _size_group_counts(ns)
+        if _n_groups(ns) >= 3:
+            # three sizes or more can tell a straight line from a curve: the cost per step of the
+            # LIGGGHTS shear cell grows as n^0.8 over 228-14 107 grains (mesh-wall work that does not
+            # grow with every grain), and a + b n put the 14 107-grain run at 1.26x and the 228-grain
+            # one at 1.35x. A power law c n^alpha (log-linear least squares) replaces the line
+            # where it fits better; each size weighted once, however many runs it has
+            w = 1.0 / np.sqrt(counts)
+            alpha_p, log_c = np.linalg.lstsq(np.column_stack([np.log(ns), np.ones_like(ns)]) * w[:, None],
+                                             np.log(tps) * w, rcond=None)[0]
+            rel_line = ((a + b * ns) / tps - 1) * w
+            rel_power = (np.exp(log_c) * ns ** alpha_p / tps - 1) * w
+            if np.sum(rel_power ** 2) < np.sum(rel_line ** 2) and 0 < alpha_p <= 1.5:
+                a, b, alpha = 0.0, float(np.exp(log_c)), float(alpha_p)
+                note += f"; power law n^{alpha:.2f}"
     else:
         a, b = 0.0, float(np.median(tps / ns))
         note = "one size: per-step overhead not separated"
@@ -264,7 +307,7 @@ def fit(samples: list[RunSample]) -> Throughput:
     if multi and single:
         effs = []
         for s in multi:
-            t1 = s.steps * (a + b * s.n_particles)
+            t1 = s.steps * (a + b * s.n_particles ** alpha)
             speedup = t1 / max(s.loop_s, 1e-12)
             effs.append((speedup - 1) / (s.ranks - 1))
         eff = float(np.clip(np.median(effs), 0.05, 1.0))
@@ -275,7 +318,7 @@ def fit(samples: list[RunSample]) -> Throughput:
     med_units = float(np.median(units)) if units else None
     if units:
         note += f"; {med_units:g} units (median of {len(units)})"
-    return Throughput(startup, float(a), float(b), eff, len(samples), note, med_units)
+    return Throughput(startup, float(a), float(b), eff, len(samples), note, med_units, alpha)
 
 
 def refresh(paths, out: Path | None = None) -> dict:

@@ -196,3 +196,23 @@ def test_stage_one_is_learned_in_its_own_time_scale_not_in_chunks():
     # counted in chunks (scale 0) the slow case would be given 12 of its chunks: about twice the stage
     in_chunks = type(p_slow)(p_slow.fixed, p_slow.unit, p_slow.max_units)
     assert expected_steps(10**9, in_chunks, Throughput(0.0, 0.0, 1e-6, units=12.0)) - p_slow.fixed > 1.9 * stage1
+
+
+def test_three_sizes_on_a_curve_fit_a_power_law_and_each_size_counts_once():
+    """The LIGGGHTS shear cell's cost per step grows as n^0.8 from 228 to 14 107 grains: a + b n
+    cannot follow it (eleven small runs and one medium run put the medium one at 1.76x before the
+    medium runs were in the table, and at 1.26x after). With three sizes the fit takes c n^alpha
+    where it is closer, each size weighted once, however many runs it has."""
+    def run(n, k):
+        t_step = 3e-6 * n ** 0.8
+        return RunSample("liggghts", "shear_cell", n, 100_000, 1, 100_000 * t_step, 100_000 * t_step, f"r{n}-{k}")
+    runs = [run(228, 0)] + [run(1025, k) for k in range(11)] + [run(14107, 0)]
+    tp = fit(runs)
+    assert tp.exponent == pytest.approx(0.8, rel=1e-6) and tp.per_step_s == 0 and "power law" in tp.note
+    for n in (228, 1025, 14107):
+        assert tp.engine_time(n, 100_000) == pytest.approx(100_000 * 3e-6 * n ** 0.8, rel=1e-6)
+    # a straight line over three sizes stays a straight line
+    lin = [RunSample("yade", "impact", n, 1000, 1, 1000 * (2e-4 + 1e-6 * n), 1000 * (2e-4 + 1e-6 * n), f"y{n}")
+           for n in (100, 1000, 10000)]
+    tl = fit(lin)
+    assert tl.exponent == 1.0 and tl.per_step_s == pytest.approx(2e-4, rel=1e-6)
