@@ -156,6 +156,8 @@ def run_cost(attempts: list[dict], steps_run: int, use_cpu: bool) -> float | Non
         return None
     reached, total = 0, 0.0
     for a in attempts:
+        if not isinstance(a, dict):
+            return None                  # not a record this module wrote
         first, last = a.get("first_step"), a.get("last_step")
         if first is None and last is None:
             continue                     # killed before its first step: start-up an uninterrupted run has once

@@ -41,6 +41,7 @@ def test_a_small_gap_is_bridged_at_the_next_rate_and_a_large_one_is_not():
     ([_a(100, 1000, 9.0, True)], 1000),                    # the record does not start at step 0
     ([_a(0, 500, 5.0)], 1000),                             # stops half-way
     ([_a(0, 500, 0.0), _a(500, 1000, 5.0, True)], 1000),   # an attempt without time
+    ([_a(0, 500, 5.0), "garbage"], 1000),                  # not a record this module wrote
 ])
 def test_an_incomplete_record_gives_no_figure(attempts, steps):
     assert run_cost(attempts, steps, use_cpu=False) is None
