@@ -10,9 +10,9 @@ the run directory holds one entry per attempt, rewritten every :attr:`AttemptRec
     {"first_step": 101680, "last_step": 236160, "wall_s": 1933.0, "cpu_s": 1911.2, "ranks": 1,
      "done": false}
 
-``cpu_s`` is the CPU time (user + system) of the engine's whole process group, read from
-``/proc/<pid>/stat`` while it runs (fields 14-17, clock ticks; a rank that exited is counted in its
-parent's ``cutime``), and the ``os.wait4`` figure once it is reaped. A fresh start clears the file.
+``cpu_s`` is the CPU time (user + system) of the engine and its descendants, read with psutil
+while it runs (a rank that exited is counted in its parent's children times), and the ``os.wait4``
+figure once it is reaped. A fresh start clears the file.
 
 :func:`run_cost` turns the record into the engine time an uninterrupted run would have taken: each
 attempt's time scaled by the share of its steps that were new (a resume repeats the steps since the
@@ -25,15 +25,14 @@ import os
 import time
 from pathlib import Path
 
+import psutil
+
 from .atomic import write_json
 
 __all__ = ["AttemptRecord", "read_attempts", "run_cost", "clear_attempts", "FILE"]
 
 #: the record's file name in a run directory
 FILE = "attempts.json"
-
-_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-
 
 def read_attempts(run_dir) -> list[dict]:
     """The attempts recorded in ``run_dir`` (oldest first); [] when none or unreadable."""
@@ -52,31 +51,23 @@ def clear_attempts(run_dir) -> None:
         pass
 
 
-def session_cpu_seconds(sid: int) -> float | None:
-    """CPU time (user + system, with reaped children) [s] of every live process of session ``sid``
-    (the engine is started in its own session, so its ranks and helpers are all there); None
-    without /proc."""
-    total = 0
+def process_tree_cpu_seconds(pid: int) -> float | None:
+    """CPU time (user + system) [s] of process ``pid``, of its live descendants (mpirun's ranks) and
+    of the children it has reaped (psutil's ``children_user``/``children_system``); None when the
+    process is gone."""
     try:
-        entries = os.listdir("/proc")
-    except OSError:
+        root = psutil.Process(pid)
+        procs = [root] + root.children(recursive=True)
+    except psutil.Error:
         return None
-    for name in entries:
-        if not name.isdigit():
-            continue
+    total = 0.0
+    for proc in procs:
         try:
-            with open(f"/proc/{name}/stat", "rb") as f:
-                stat = f.read().decode(errors="replace")
-        except OSError:
-            continue                                      # exited meanwhile
-        fields = stat[stat.rfind(")") + 2:].split()       # after "(comm)": state is field 3
-        try:
-            if int(fields[3]) != sid:                     # field 6: session id
-                continue
-            total += sum(int(x) for x in fields[11:15])   # fields 14-17: utime stime cutime cstime
-        except (IndexError, ValueError):
+            t = proc.cpu_times()
+        except psutil.Error:            # exited meanwhile
             continue
-    return total / _TICKS
+        total += t.user + t.system + t.children_user + t.children_system
+    return total
 
 
 class AttemptRecord:
@@ -84,7 +75,7 @@ class AttemptRecord:
     docstring). ``update`` is cheap to call often: it writes every :attr:`EVERY` seconds."""
 
     #: seconds between two writes of the record (ORCHESTRATOR_ATTEMPT_EVERY overrides it, e.g. for a
-    #: test that kills a run after a few seconds); a write scans /proc once, well under a millisecond
+    #: test that kills a run after a few seconds)
     EVERY = float(os.environ.get("ORCHESTRATOR_ATTEMPT_EVERY", "5"))
 
     def __init__(self, run_dir, first_step: int | None, ranks: int = 1):
@@ -113,17 +104,17 @@ class AttemptRecord:
             self.entry["first_step"] = int(step)
         self.entry["last_step"] = max(self.entry["last_step"] or 0, int(step))
 
-    def update(self, step: int, sid: int | None = None, force: bool = False) -> None:
+    def update(self, step: int, pid: int | None = None, force: bool = False) -> None:
         """Note the engine's current ``step`` and, every EVERY seconds, write the record with the
-        wall time and the CPU time of session ``sid`` so far."""
+        wall time and the CPU time of process ``pid`` and its descendants so far."""
         self._note(step)
         now = time.perf_counter()
         if not force and now < self.next:
             return
         self.next = now + self.EVERY
         self.entry["wall_s"] = now - self.t0
-        if sid is not None:
-            cpu = session_cpu_seconds(sid)
+        if pid is not None:
+            cpu = process_tree_cpu_seconds(pid)
             if cpu is not None:
                 self.entry["cpu_s"] = cpu
         self._write()

@@ -6,10 +6,11 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
-from orchestrator.attempts import AttemptRecord, read_attempts, run_cost, session_cpu_seconds
+from orchestrator.attempts import AttemptRecord, process_tree_cpu_seconds, read_attempts, run_cost
 
 
 def _a(first, last, t, done=False):
@@ -54,22 +55,20 @@ def test_an_attempt_killed_before_its_first_step_adds_nothing():
 
 
 def test_the_record_follows_a_real_process(tmp_path, monkeypatch):
-    """A process group burning CPU: the record holds its session's CPU time while it runs, and the
-    second attempt is appended to the first."""
+    """A child process burning CPU: the record holds its CPU time while it runs, and the second
+    attempt is appended to the first."""
     monkeypatch.setattr(AttemptRecord, "EVERY", 0.0)
     burn = "import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3: pass\ntime.sleep(5)\n"
     proc = subprocess.Popen([sys.executable, "-c", burn], start_new_session=True)
     try:
         rec = AttemptRecord(tmp_path, 0)
-        deadline = 0
-        while deadline < 100:
+        for _ in range(100):
             rec.update(1234, proc.pid)
             if (rec.entry["cpu_s"] or 0) >= 0.3:
                 break
-            deadline += 1
-            subprocess.run(["sleep", "0.05"])
+            time.sleep(0.05)
         assert 0.3 <= read_attempts(tmp_path)[0]["cpu_s"] < 2.0
-        assert session_cpu_seconds(proc.pid) >= 0.3
+        assert process_tree_cpu_seconds(proc.pid) >= 0.3
     finally:
         proc.kill()
         proc.wait()
