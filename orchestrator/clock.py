@@ -245,9 +245,10 @@ def samples_from_runs(paths) -> list[RunSample]:
     return out
 
 
-def _size_group_counts(ns: np.ndarray) -> np.ndarray:
-    """For each run, how many runs share its size group [-]: counts within a factor 1.5 of the
-    group's smallest (a packing's count drifts by a few grains with the seed) are one size."""
+def _size_groups(ns: np.ndarray) -> np.ndarray:
+    """Each run's size group (0, 1, ...) [-]: counts within a factor 1.5 of the group's smallest are
+    one size (a packing's count drifts by a few grains with the seed, and such counts cannot
+    separate the per-step from the per-particle cost)."""
     order = np.argsort(ns)
     group = np.empty(len(ns), int)
     g, lo = -1, None
@@ -255,12 +256,7 @@ def _size_group_counts(ns: np.ndarray) -> np.ndarray:
         if lo is None or ns[i] > 1.5 * lo:
             g, lo = g + 1, ns[i]
         group[i] = g
-    return np.bincount(group)[group].astype(float)
-
-
-def _n_groups(ns: np.ndarray) -> int:
-    """How many sizes the counts make (counts within a factor 1.5 are one size) [-]."""
-    return int(round(np.sum(1.0 / _size_group_counts(ns))))
+    return group
 
 
 def fit(samples: list[RunSample]) -> Throughput:
@@ -275,23 +271,21 @@ def fit(samples: list[RunSample]) -> Throughput:
     startup = float(np.median([max(s.engine_s - s.loop_s, 0.0) for s in base]))
     ns = np.array([s.n_particles for s in base], float)
     tps = np.array([s.loop_s * k / s.steps for s, k in zip(base, scale)])
-    # counts within a factor 1.5 of each other (a packing's count drifts by a few grains with the
-    # seed) cannot separate the per-step from the per-particle cost: they count as one size
-    sizes = len(set(ns.tolist())) if ns.max() / ns.min() >= 1.5 else 1
+    group = _size_groups(ns)
+    sizes = int(group.max()) + 1
     alpha = 1.0
     if sizes >= 2:
         A = np.column_stack([np.ones_like(ns), ns])
         from scipy.optimize import nnls       # here: not needed to read the table (validate, #16)
         (a, b), _ = nnls(A / tps[:, None], np.ones_like(tps))       # relative residuals
         note = f"{sizes} sizes"
-        counts = _size_group_counts(ns)
-        if _n_groups(ns) >= 3:
+        if sizes >= 3:
             # three sizes or more can tell a straight line from a curve: the cost per step of the
             # LIGGGHTS shear cell grows as n^0.8 over 228-14 107 grains (mesh-wall work that does not
             # grow with every grain), and a + b n put the 14 107-grain run at 1.26x and the 228-grain
             # one at 1.35x. A power law c n^alpha (log-linear least squares) replaces the line
             # where it fits better; each size weighted once, however many runs it has
-            w = 1.0 / np.sqrt(counts)
+            w = 1.0 / np.sqrt(np.bincount(group)[group])
             alpha_p, log_c = np.linalg.lstsq(np.column_stack([np.log(ns), np.ones_like(ns)]) * w[:, None],
                                              np.log(tps) * w, rcond=None)[0]
             rel_line = ((a + b * ns) / tps - 1) * w
