@@ -23,6 +23,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 FLOOR = 1.0          # m/s, issue #14: no grain above 1 m/s in the frame after the drag goes off
 
@@ -155,7 +156,6 @@ def report(run: Path) -> dict:
     if curves.exists():
         # the 10-row mean of σ1/σ3 over the plateau ε_a = 5-15 % (mean and std in time: how much one run
         # wanders, the scale a one-seed engine difference is judged on) and where it peaks
-        import pandas as pd
         d = pd.read_csv(curves)
         m = (d["axial_strain"] >= 0.05) & (d["axial_strain"] <= 0.15)
         if m.any():
