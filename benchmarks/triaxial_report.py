@@ -52,6 +52,40 @@ def _frames(run: Path):
     return np.concatenate(st), np.concatenate(sp), None
 
 
+def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floor: float = 0.01,
+                   up_to: float = 0.15) -> dict:
+    """The boundary's and the grains' convex hull's ε_v while loading (frames.h5 controls), at the
+    strains reached, their largest difference up to ``up_to`` and over the whole loading, and the
+    first strain where it passes ``floor`` (issue #14 item 4: within 0.01); and the sample's
+    radial extent (largest and 95th-percentile grain distance from the axis through the grains'
+    mean x, y [mm]) at a third of the loading frames and at the last, the bulge the hull follows."""
+    if not (run / "frames.h5").exists():
+        return {}
+    from orchestrator.frames import Frames
+    f = Frames(run)
+    c = f.controls
+    if "volumetric_strain_hull" not in c:
+        return {}
+    ld = np.flatnonzero(c["stage"] >= 2)
+    if not len(ld):
+        return {}
+    ea, eb, eh = c["axial_strain"][ld], c["volumetric_strain"][ld], c["volumetric_strain_hull"][ld]
+    d = np.abs(eb - eh)
+    out = {"at": {f"{e:g}": [round(float(eb[i]), 4), round(float(eh[i]), 4), round(float(d[i]), 4)]
+                  for e in strains if ea.max() >= e - 1e-4 for i in [int(np.argmin(np.abs(ea - e)))]},
+           f"max_diff_to_{up_to:g}": float(d[ea <= up_to + 1e-4].max()) if (ea <= up_to + 1e-4).any() else None,
+           "max_diff": float(d.max()),
+           f"first_strain_above_{floor:g}": float(ea[d > floor][0]) if (d > floor).any() else None}
+    extent = {}
+    for k in (ld[len(ld) // 3], ld[-1]):
+        x = f.position[k]
+        r = np.hypot(x[:, 0] - np.nanmean(x[:, 0]), x[:, 1] - np.nanmean(x[:, 1]))
+        extent[f"frame {int(k)} (ε_a {float(c['axial_strain'][k]):.3f})"] = [round(float(np.nanmax(r)) * 1e3, 3),
+                                                                              round(float(np.nanpercentile(r, 95)) * 1e3, 3)]
+    out["radial_extent_max_p95_mm"] = extent
+    return out
+
+
 def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int = 10) -> dict:
     """σ1/σ3 (10-row running means of σ1 and σ3) and the boundary's ε_v at the strains reached, from
     ``triax.txt`` alone (a run still going: no frames.h5 yet), with the definitions of
@@ -152,6 +186,8 @@ def report(run: Path) -> dict:
             out["K_nonaffine_over_U_loading_median"] = float(np.median(kn[load]))
             out["K_nonaffine_over_U_loading_max"] = float(np.max(kn[load]))
     out["series_figures"] = series_figures(run)
+    # ε_v of the boundary and of the hull: [boundary, hull, |difference|] at each strain
+    out["volume_methods"] = volume_methods(run)
     curves = run / "analysis" / "triaxial_curves.csv"
     if curves.exists():
         # the 10-row mean of σ1/σ3 over the plateau ε_a = 5-15 % (mean and std in time: how much one run
