@@ -6,7 +6,7 @@ For each run: the end of stage 1 (scene_summary.json, or the engine log of a run
 drag removal (ramp start and drag-off step from the engine log), the fastest grain and the number of
 grains above 1 m/s in every frame from the drag-off frame on (frames.h5; for a YADE run still going,
 its dump/chunk.*.npz), and once the run is complete the loading figures: σ3 stray (largest |σ3/p - 1|
-of 10-row means), the largest |ε_v(boundary) - ε_v(hull)|, K'/U (non-affine kinetic over Hertz
+of 10-row means), the largest |ε_v(boundary) - ε_v(hull)| for the convex hull and the stacked-slab hull, K'/U (non-affine kinetic over Hertz
 elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3, ε_v at
 ε_a = 1, 2, 5, 10, 15 % (orchestrator.stability.observables, the source of the crossval numbers).
 ``stage1_speeds``: per stage-1 frame the median, rms and largest grain speed and the boundary
@@ -53,15 +53,23 @@ def _frames(run: Path):
 
 
 def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floor: float = 0.01,
-                   up_to: float = 0.15) -> dict:
-    """The boundary's and the grains' convex hull's ε_v while loading (frames.h5 controls), at the
-    strains reached, their largest difference up to ``up_to`` and over the whole loading, and the
-    first strain where it passes ``floor`` (issue #14 item 4: within 0.01); and the sample's
-    radial extent (largest and 95th-percentile grain distance from the axis through the grains'
-    mean x, y [mm]) at a third of the loading frames and at the last, the bulge the hull follows."""
+                   up_to: float = 0.15, slabs=(1.0, 2.0, 4.0)) -> dict:
+    """The volumetric strain while loading three ways: the boundary's, the grains' convex hull's
+    and the grains' stacked-slab hull's (``slab_hull_volume``, slabs of SLAB_HULL_D50 d50, from
+    the frames' positions, so older runs without that control get it too): at the strains reached
+    [boundary, hull, slab hull], each hull's largest difference from the boundary up to ``up_to``
+    and over the whole loading, and the first strain where it passes ``floor`` (issue #14 item 4:
+    within 0.01); the slab hull's largest difference for slabs of ``slabs`` d50 (how much the
+    choice matters); the sample's radial extent (largest and 95th-percentile grain distance from
+    the axis through the grains' mean x, y [mm]) at a third of the loading frames and at the last;
+    and its ``neck`` at the last frame: the depth [d50] of the deepest waist of the outline (per
+    tenth of the height, the mean over 8 sectors of the farthest grain surface from the axis,
+    below the lesser of the widest tenth under it and the widest above it), which the global hull
+    bridges and the slab hull follows."""
     if not (run / "frames.h5").exists():
         return {}
     from orchestrator.frames import Frames
+    from orchestrator.scenes.triaxial import SLAB_HULL_D50, slab_hull_volume
     f = Frames(run)
     c = f.controls
     if "volumetric_strain_hull" not in c:
@@ -69,21 +77,55 @@ def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floo
     ld = np.flatnonzero(c["stage"] >= 2)
     if not len(ld):
         return {}
+    r = f.radius
+    d50 = 2 * float(np.median(r))       # the frames keep radii: the median diameter stands in for d50
+    ref = max(0, int(ld[0]) - 1)        # the last stage-1 frame: the controls' reference
+
+    def slab_strain(m):
+        vol = []
+        for k in [ref, *ld]:
+            x = f.position[k]
+            vol.append(slab_hull_volume(x, r, float(np.nanmin(x[:, 2] - r)), float(np.nanmax(x[:, 2] + r)), m * d50))
+        vol = np.asarray(vol)
+        return (vol[0] - vol[1:]) / vol[0]
+
     ea, eb, eh = c["axial_strain"][ld], c["volumetric_strain"][ld], c["volumetric_strain_hull"][ld]
-    d = np.abs(eb - eh)
-    out = {"at": {f"{e:g}": [round(float(eb[i]), 4), round(float(eh[i]), 4), round(float(d[i]), 4)]
-                  for e in strains if ea.max() >= e - 1e-4 for i in [int(np.argmin(np.abs(ea - e)))]},
-           f"max_diff_to_{up_to:g}": float(d[ea <= up_to + 1e-4].max()) if (ea <= up_to + 1e-4).any() else None,
-           "max_diff": float(d.max()),
-           f"first_strain_above_{floor:g}": float(ea[d > floor][0]) if (d > floor).any() else None}
+    es = slab_strain(SLAB_HULL_D50)
+    upto = ea <= up_to + 1e-4
+    out = {"at": {f"{e:g}": [round(float(eb[i]), 4), round(float(eh[i]), 4), round(float(es[i]), 4)]
+                  for e in strains if ea.max() >= e - 1e-4 for i in [int(np.argmin(np.abs(ea - e)))]}}
+    for name, ev in (("hull", eh), ("slab_hull", es)):
+        d = np.abs(eb - ev)
+        out[name] = {f"max_diff_to_{up_to:g}": float(d[upto].max()) if upto.any() else None,
+                     "max_diff": float(d.max()),
+                     f"first_strain_above_{floor:g}": float(ea[d > floor][0]) if (d > floor).any() else None}
+    out["slab_hull"]["max_diff_by_slab_d50"] = {f"{m:g}": round(float(np.abs(eb - (es if m == SLAB_HULL_D50 else
+                                                                                    slab_strain(m))).max()), 4)
+                                                for m in slabs}
     extent = {}
     for k in (ld[len(ld) // 3], ld[-1]):
         x = f.position[k]
-        r = np.hypot(x[:, 0] - np.nanmean(x[:, 0]), x[:, 1] - np.nanmean(x[:, 1]))
-        extent[f"frame {int(k)} (ε_a {float(c['axial_strain'][k]):.3f})"] = [round(float(np.nanmax(r)) * 1e3, 3),
-                                                                              round(float(np.nanpercentile(r, 95)) * 1e3, 3)]
+        rr = np.hypot(x[:, 0] - np.nanmean(x[:, 0]), x[:, 1] - np.nanmean(x[:, 1]))
+        extent[f"frame {int(k)} (ε_a {float(c['axial_strain'][k]):.3f})"] = [round(float(np.nanmax(rr)) * 1e3, 3),
+                                                                              round(float(np.nanpercentile(rr, 95)) * 1e3, 3)]
     out["radial_extent_max_p95_mm"] = extent
+    out["neck_d50"] = {f"ε_a {float(c['axial_strain'][k]):.3f}": neck_depth(f.position[k], r, d50) for k in (ref, ld[-1])}
     return out
+
+
+def neck_depth(pos: np.ndarray, r: np.ndarray, d50: float, tenths: int = 10, sectors: int = 8) -> float:
+    """Depth [d50] of the outline's deepest waist (volume_methods): 0 for a barrel or a cylinder."""
+    ok = ~np.isnan(pos).any(axis=1)
+    x, rr = pos[ok], r[ok]
+    cx, cy = x[:, 0].mean(), x[:, 1].mean()
+    zb, zt = (x[:, 2] - rr).min(), (x[:, 2] + rr).max()
+    band = np.clip(((x[:, 2] - zb) / (zt - zb) * tenths).astype(int), 0, tenths - 1)
+    sector = ((np.arctan2(x[:, 1] - cy, x[:, 0] - cx) + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
+    reach = np.zeros((tenths, sectors))
+    np.maximum.at(reach, (band, sector), np.hypot(x[:, 0] - cx, x[:, 1] - cy) + rr)
+    R = reach.mean(axis=1)
+    depth = [min(R[:i].max(), R[i + 1:].max()) - R[i] for i in range(1, tenths - 1)]
+    return round(max(0.0, float(max(depth))) / d50, 3)
 
 
 def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int = 10) -> dict:
@@ -186,7 +228,7 @@ def report(run: Path) -> dict:
             out["K_nonaffine_over_U_loading_median"] = float(np.median(kn[load]))
             out["K_nonaffine_over_U_loading_max"] = float(np.max(kn[load]))
     out["series_figures"] = series_figures(run)
-    # ε_v of the boundary and of the hull: [boundary, hull, |difference|] at each strain
+    # ε_v of the boundary, the hull and the slab hull at each strain; each hull's difference
     out["volume_methods"] = volume_methods(run)
     curves = run / "analysis" / "triaxial_curves.csv"
     if curves.exists():
