@@ -11,6 +11,12 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
 - ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
   predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind).
 
+``load`` is the machine's mean load average over the run's cores (``orchestrator.attempts``; "-"
+for runs recorded before it was kept). A multi-rank run with a load above its cores by more than
+half a core is marked ``shared``: its wall time (the time that counts for ranks, which poll while
+they wait) measured the other runs too; the fit leaves it out, and the largest error is given with
+and without such runs.
+
 Then ``orchestrator clock refresh RUNS --package`` stores the fit of all of them.
 """
 from __future__ import annotations
@@ -44,8 +50,8 @@ def main(argv=None) -> int:
     samples = samples_from_runs(roots)
     table = load_table()
     print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'w':>2s} {'actual s':>9s} "
-          f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s}  run")
-    worst = None
+          f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'load':>9s}  run")
+    worst = worst_quiet = None
     for s in samples:
         # what `run --dry-run` printed before the run: the step budget, or where the scene decides its
         # step count while it runs (triaxial stage 1), the steps the engine's measured runs took
@@ -58,10 +64,16 @@ def main(argv=None) -> int:
         r2 = loo / s.engine_s if loo == loo else math.nan
         if r2 == r2:
             worst = max(worst or 0.0, abs(r2 - 1))
+            if not s.shared:
+                worst_quiet = max(worst_quiet or 0.0, abs(r2 - 1))
+        load = "-" if s.load is None else f"{s.load:.1f}/{s.cores}"
         print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {s.ranks:2d} {s.engine_s:9.1f} "
-              f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f}  {Path(s.source).name}")
+              f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {load:>9s}  {Path(s.source).name}"
+              + ("  shared" if s.shared else ""))
     print("largest leave-one-out error: " + (f"{100 * worst:.0f} % (floor: 30 %)" if worst is not None
           else "n/a (no run has another of its engine and scene to be predicted from)"))
+    if worst_quiet is not None and worst_quiet != worst:
+        print(f"largest leave-one-out error, runs that did not share the machine: {100 * worst_quiet:.0f} %")
     return 0
 
 

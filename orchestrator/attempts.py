@@ -8,11 +8,14 @@ the run directory holds one entry per attempt, rewritten every :attr:`AttemptRec
 (5; atomically; a SIGKILL loses at most that much)::
 
     {"first_step": 101680, "last_step": 236160, "wall_s": 1933.0, "cpu_s": 1911.2, "ranks": 1,
-     "done": false}
+     "load": 2.9, "cores": 2, "done": false}
 
 ``cpu_s`` is the CPU time (user + system) of the engine and its descendants, read with psutil
 while it runs (a rank that exited is counted in its parent's children times), and the ``os.wait4``
-figure once it is reaped. A fresh start clears the file.
+figure once it is reaped. ``load`` is the machine's one-minute load average, averaged over the
+samples taken at each write (the attempt's own ranks included), beside the machine's ``cores``: a
+run whose ``load`` exceeds its ``cores`` shared the machine, and its wall time is longer than a
+quiet machine's (``benchmarks/bench_estimate.py`` marks it). A fresh start clears the file.
 
 :func:`run_cost` turns the record into the engine time an uninterrupted run would have taken: each
 attempt's time scaled by the share of its steps that were new (a resume repeats the steps since the
@@ -87,7 +90,8 @@ class AttemptRecord:
         self.next = self.t0 + self.EVERY
         first = None if first_step is None else int(first_step)
         self.entry = {"first_step": first, "last_step": first, "wall_s": 0.0,
-                      "cpu_s": None, "ranks": int(ranks), "done": False}
+                      "cpu_s": None, "ranks": int(ranks), "load": None, "cores": os.cpu_count(), "done": False}
+        self._loads: list[float] = []
         self.earlier = read_attempts(run_dir)
         self._write()
 
@@ -113,11 +117,19 @@ class AttemptRecord:
             return
         self.next = now + self.EVERY
         self.entry["wall_s"] = now - self.t0
+        self._sample_load()
         if pid is not None:
             cpu = process_tree_cpu_seconds(pid)
             if cpu is not None:
                 self.entry["cpu_s"] = cpu
         self._write()
+
+    def _sample_load(self) -> None:
+        try:
+            self._loads.append(os.getloadavg()[0])
+        except OSError:                 # no load average on this platform
+            return
+        self.entry["load"] = round(sum(self._loads) / len(self._loads), 2)
 
     def close(self, step: int, cpu_s: float | None, done: bool) -> None:
         """The attempt ended at ``step`` with the engine's reaped CPU time ``cpu_s`` [s]; ``done``:

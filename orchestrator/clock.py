@@ -101,6 +101,17 @@ class RunSample:
     source: str = field(default="", compare=False)
     #: the run's StepPlan (scenes whose step count is decided while they run), None otherwise
     plan: object = field(default=None, compare=False)
+    #: the machine's mean one-minute load average while it ran, its own ranks included, and the
+    #: machine's cores (orchestrator.attempts); None for runs made before the record had them
+    load: float | None = field(default=None, compare=False)
+    cores: int | None = field(default=None, compare=False)
+
+    @property
+    def shared(self) -> bool:
+        """A multi-rank run that shared the machine (load above its cores by more than half a
+        core): its wall time, the only time that counts for ranks that poll while they wait, is
+        longer than a quiet machine's, so the fit leaves it out (one-rank runs count in CPU time)."""
+        return self.ranks > 1 and self.load is not None and bool(self.cores) and self.load > self.cores + 0.5
 
     @property
     def units(self) -> float | None:
@@ -195,13 +206,16 @@ def _sample(run_dir: Path) -> RunSample | None:
     loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
         else engine_s
     startup = max(engine_s - loop, 0.0)
+    attempts = s.get("attempts") or read_attempts(run_dir)
+    load, cores = _machine_load(attempts)
     if s.get("resumed_from"):
         # the summary's engine time covers only the last attempt: the record of every attempt
         # (orchestrator.attempts) gives the whole run's, or the run does not count
-        cost = run_cost(s.get("attempts") or read_attempts(run_dir), steps, use_cpu=ranks == 1)
+        cost = run_cost(attempts, steps, use_cpu=ranks == 1)
         if cost is None:
             return None
-        return RunSample(s["engine"], kind, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan)
+        return RunSample(s["engine"], kind, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,
+                         load, cores)
     cpu = wt.get("engine_cpu")
     if isinstance(cpu, (int, float)) and cpu > 0 and ranks == 1:
         # a one-rank engine's CPU time stands for its wall time on a quiet machine: the wall time of a
@@ -211,7 +225,19 @@ def _sample(run_dir: Path) -> RunSample | None:
         # 806 s CPU, 403 s per rank), so their wall time is kept
         engine_s = min(float(cpu) / ranks, engine_s)
         loop = engine_s - startup if startup < engine_s else engine_s
-    return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir), plan)
+    return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir), plan, load, cores)
+
+
+def _machine_load(attempts: list) -> tuple[float | None, int | None]:
+    """The attempts' load averages weighted by their wall times, and the machine's cores (the
+    largest recorded); (None, None) without a record of them."""
+    rows = [a for a in attempts if isinstance(a, dict) and isinstance(a.get("load"), (int, float))
+            and isinstance(a.get("wall_s"), (int, float)) and a["wall_s"] > 0]
+    if not rows:
+        return None, None
+    wall = sum(a["wall_s"] for a in rows)
+    cores = max((int(a["cores"]) for a in rows if isinstance(a.get("cores"), int)), default=None)
+    return sum(a["load"] * a["wall_s"] for a in rows) / wall, cores
 
 
 def step_plan(kind: str, scene_params: dict):
@@ -263,6 +289,8 @@ def fit(samples: list[RunSample]) -> Throughput:
     """Fit one engine+scene's cost model to its runs (see the module docstring)."""
     if not samples:
         raise ValueError("no runs to fit")
+    # a multi-rank run that shared the machine measured the other runs too (RunSample.shared)
+    samples = [s for s in samples if not s.shared] or samples
     single = [s for s in samples if s.ranks == 1]
     # without a one-rank run the multi-rank runs stand in, scaled to one rank with the assumed
     # efficiency (they cannot measure the efficiency against themselves)

@@ -76,6 +76,8 @@ def test_the_record_follows_a_real_process(tmp_path, monkeypatch):
     AttemptRecord(tmp_path, None).close(3000, 0.2, done=True)
     att = json.loads((tmp_path / "attempts.json").read_text())
     assert [(a["first_step"], a["last_step"], a["done"]) for a in att] == [(0, 2000, False), (3000, 3000, True)]
+    # the machine's load while the first attempt ran, beside its cores (a shared machine: its wall time is long)
+    assert att[0]["load"] >= 0 and att[0]["cores"] == os.cpu_count()
     assert oct(os.stat(tmp_path / "attempts.json").st_mode & 0o777) == oct(0o666 & ~_umask())
 
 
@@ -83,3 +85,17 @@ def _umask() -> int:
     m = os.umask(0)
     os.umask(m)
     return m
+
+
+def test_a_multi_rank_run_that_shared_the_machine_is_left_out_of_the_fit():
+    """Two-rank runs poll while they wait, so only their wall time counts, and beside other runs it
+    measures those too: a run at load 4.1 on 2 cores is marked shared and the fit uses the quiet
+    one; one-rank runs (counted in CPU time) are never shared."""
+    from orchestrator.clock import RunSample, _machine_load, fit
+    assert _machine_load([{"load": 1.0, "wall_s": 30.0, "cores": 2}, {"load": 3.0, "wall_s": 10.0, "cores": 2}]) == (1.5, 2)
+    assert _machine_load([_a(0, 10, 1.0)]) == (None, None)
+    quiet = RunSample("liggghts", "shear_cell", 1000, 10000, 2, 100.0, 100.0, "quiet", load=2.1, cores=2)
+    shared = RunSample("liggghts", "shear_cell", 1000, 10000, 2, 300.0, 300.0, "shared", load=4.1, cores=2)
+    one = RunSample("liggghts", "shear_cell", 1000, 10000, 1, 150.0, 150.0, "one", load=4.1, cores=2)
+    assert shared.shared and not quiet.shared and not one.shared
+    assert fit([quiet, shared]).engine_time(1000, 10000, 2) == pytest.approx(fit([quiet]).engine_time(1000, 10000, 2))
