@@ -168,6 +168,17 @@ def _triaxial(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict, s
                               "0.593 (CT, §2.1)"))
     if isinstance(e.get("hull"), (int, float)):
         rows.append(KeyResult("void ratio at the start of loading, grains' hull", float(e["hull"]), ""))
+    # the boundary's volumetric strain against the grains' own volumes while loading (issue #14:
+    # within 0.01); the slab hull follows a neck, the convex hull bridges it (docs/triaxial.md)
+    vm = (summary.get("scene") or {}).get("volume_methods") or {}
+    slab, hull = vm.get("volumetric_strain_max_abs_diff_slab_hull"), vm.get("volumetric_strain_max_abs_diff")
+    if isinstance(slab, (int, float)):
+        rows.append(KeyResult("ε_v boundary vs grains' slab hull, largest while loading (≤ 1 %)",
+                              float(f"{100 * slab:.2g}"), "%", None, "", "", ok=slab <= 0.01))
+    if isinstance(hull, (int, float)):
+        rows.append(KeyResult("ε_v boundary vs grains' convex hull, largest while loading",
+                              float(f"{100 * hull:.2g}"), "%", None, "",
+                              "the convex hull bridges a neck" if isinstance(slab, (int, float)) and hull > 0.01 >= slab else ""))
     return rows
 
 
