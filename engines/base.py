@@ -11,6 +11,8 @@ Physics features (the vocabulary scenes use in ``required_features``):
 ``low_restitution``        e_n below 0.214 (LIGGGHTS' model hertz floor)
 ``seed000_damping``        γ_n = √(4/3 E* m*) with force γ_n √ξ ξ̇ (seed 000 eq. 1)
 ``sliding_friction``       Coulomb sliding with a tangential spring (history)
+``tangential_history_displacement``  the spring keeps the total tangential displacement ξ, F_t = k_t(δ) ξ
+``tangential_history_force``         the spring keeps its force, incremented by k_t(δ) Δξ (contact.tangential_history)
 ``adhesion``               constant pull-off F_adh · r_eff/⟨r_eff⟩ (seed 000 eq. 1)
 ``rolling_friction``       rolling resistance, constant μ_rol
 ``rolling_friction_load``  load-dependent μ_rol = √(2 r_eff ξ) (seed 000)
@@ -51,7 +53,8 @@ FEATURES = (
     "hertz", "restitution_damping", "low_restitution", "seed000_damping", "sliding_friction", "adhesion",
     "rolling_friction", "rolling_friction_load", "torsion_friction", "plane_wall",
     "cylinder_wall", "mesh_walls", "rotating_walls", "servo_wall", "membrane", "clumps",
-    "placed_clumps", "particle_stress", "contact_output", "periodic",
+    "placed_clumps", "particle_stress", "contact_output", "periodic", "tangential_history_displacement",
+    "tangential_history_force",
 )
 
 #: engine version per (adapter, executable), probed once per process (Engine.version)

@@ -112,6 +112,12 @@ class Contact(Strict):
     friction: float = Field(0.5, ge=0)
     tangential_stiffness_ratio: float | None = Field(
         None, gt=0, description="k_t/k_n; None = Mindlin's 2(1-ν)/(2-ν), seed 000 uses 2/7")
+    tangential_history: Literal["displacement", "force"] | None = Field(
+        None, description="how the Mindlin tangential spring keeps its history: 'displacement' (the total "
+                          "tangential displacement ξ, F_t = k_t(δ) ξ: LIGGGHTS, LAMMPS mindlin) or 'force' "
+                          "(the force, incremented by k_t(δ) Δξ each step: YADE, LAMMPS mindlin/force); the two "
+                          "differ when the overlap changes under a tangential load. None: each engine's own "
+                          "(docs/crossval.md)")
     adhesion: Adhesion | None = None
     rolling: RollingFriction | None = None
     torsion: TorsionFriction | None = None

@@ -58,6 +58,13 @@ def wall_material(case) -> tuple[float, float]:
     return case.wall_moduli()
 
 
+def tangential_history_features(case) -> list[str]:
+    """``tangential_history_<displacement|force>`` when the case names the Mindlin spring's history
+    (``contact.tangential_history``) and has friction to keep one; [] otherwise (each engine's own)."""
+    c = case.contact
+    return [f"tangential_history_{c.tangential_history}"] if c.tangential_history and c.friction > 0 else []
+
+
 def derive(case) -> Params:
     """All numbers the templates need (:class:`orchestrator.params.Params`, SI units). Every
     engine the case names derives its own numbers from them once here (``Engine.engine_params``),
@@ -98,7 +105,7 @@ def derive(case) -> Params:
         r_min=r_min, r_max=r_max, dt=dt, dt_rayleigh=dt_R, dt_hertz=dt_H, dt_critical=dt_crit,
         dt_fraction=dt / dt_crit, v_max=v_max, dt_damping_factor=damping_factor,
         gravity=case.gravity, gravity_vector=[0.0, 0.0, -case.gravity],
-        features=list(mod.required_features(case)), scene=None)
+        features=list(mod.required_features(case)) + tangential_history_features(case), scene=None)
     params = params.replace(scene=mod.derive(case, params))
     if too_big:
         from .stability.checks import largest_safe_dt

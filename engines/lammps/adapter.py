@@ -67,6 +67,10 @@ class Lammps(Engine):
         "restitution_damping": "damping coeff_restitution (Tsuji form) with limit_damping (clipped, as LIGGGHTS)",
         "low_restitution": "damping coeff_restitution: any e_n in (0, 1]",
         "sliding_friction": "tangential mindlin k_t = 8 G* a, total-displacement history, Coulomb limit mu*Fn",
+        "tangential_history_displacement": "tangential mindlin: the total displacement, turned and rescaled onto "
+                                           "the tangent plane each step (the default)",
+        "tangential_history_force": "tangential mindlin/force: the accumulated elastic force, incremented by "
+                                    "k_t(delta) dxi (YADE's Mindlin law)",
         "plane_wall": "fix wall/gran granular ... zplane",
         "periodic": "boundary p",
         "rolling_friction": "rolling sds: k_r = k_t (torque k_t R*^2 per radian), limit mu_r R* F_ncrit (plane shear)",

@@ -117,6 +117,20 @@ def seed_term_ratios(case, params, xs) -> list:
     return rows
 
 
+def tangential_model(params: dict, base: str = "mindlin") -> str:
+    """LAMMPS' tangential model for ``base`` (``mindlin``): ``mindlin/force`` when the case asks for
+    the force history (feature ``tangential_history_force``), ``base`` otherwise. LAMMPS keeps the
+    force with ``mindlin/force`` and ``mindlin_rescale/force`` only: ``linear_history`` has no such
+    form, and a case asking for it on the seed's linear spring is refused."""
+    if "tangential_history_force" not in params.get("features", ()):
+        return base
+    if base != "mindlin":
+        raise DerivationError(f"contact.tangential_history: force: LAMMPS' '{base}' tangential model keeps the "
+                              "displacement only (its force forms are mindlin/force and mindlin_rescale/force); "
+                              "remove contact.tangential_history or run this case on yade")
+    return "mindlin/force"
+
+
 def lammps_numbers(params: dict, case=None) -> dict:
     """The numbers the LAMMPS templates need beyond ``params`` (SI); ``case`` for the scenes with
     rolling and twisting resistance (their median diameter)."""
@@ -128,6 +142,8 @@ def lammps_numbers(params: dict, case=None) -> dict:
         extra = rolling_twisting(contact, case.scene.psd.median, mat["rho"])
     return {**extra,
         "damping": d,
+        # contact.tangential_history: force -> mindlin/force (the history is the force, as YADE's)
+        "tangential": tangential_model(params),
         "pair": {"E": mat["E"], "nu": mat["nu"], "kt": 8.0 * params["G_eff_pp"],
                  "xgt": tangential_damping_factor(params["E_eff_pp"], params["G_eff_pp"])},
         "wall": {"E": wall_young(params["E_eff_pw"], mat["nu"]), "nu": mat["nu"], "kt": 8.0 * params["G_eff_pw"],
@@ -203,7 +219,7 @@ def shear_cell_law(params: dict, case, damping: str) -> dict:
         kt = c["kt_seed"]
         xi = c["expected_overlap"]
         xgt = 2.0 * math.sqrt(kt * m_eff) / (eta * m_eff * math.sqrt(R_eff * xi))
-        out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": eta, "tangential": "linear_history",
+        out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": eta, "tangential": tangential_model(params, "linear_history"),
                        "kt": kt, "xgt": xgt, "mu": params["friction"], "damping_model": "viscoelastic"}
         eta_w = viscoelastic_eta(seed_gamma_n(E_pw, m50), m50, r50)
         out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": eta_w,
@@ -211,12 +227,12 @@ def shear_cell_law(params: dict, case, damping: str) -> dict:
     else:
         d = restitution_damping({"restitution": {"target": c["restitution"]["target"]}})
         model = "coeff_restitution" + (" limit_damping" if d["limit_damping"] else "")
-        out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": d["e_input"], "tangential": "mindlin",
+        out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": d["e_input"], "tangential": tangential_model(params),
                        "kt": 8.0 * params["G_eff_pp"], "xgt": tangential_damping_factor(E_pp, params["G_eff_pp"]),
                        "mu": params["friction"], "damping_model": model}
         out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": d["e_input"],
                        "damping_model": model}
-    frictional = {"tangential": "mindlin", "kt": 8.0 * params["G_eff_pw"],
+    frictional = {"tangential": tangential_model(params), "kt": 8.0 * params["G_eff_pw"],
                   "xgt": tangential_damping_factor(E_pw, params["G_eff_pw"]), "mu": out["wall_mu"]}
     frictionless = {"tangential": "linear_nohistory", "kt": None, "xgt": 0.0, "mu": 0.0}
     if out["wall_mu"] > 0 and sc.get("wall_friction_from", 0) > 0:

@@ -60,6 +60,8 @@ class Liggghts(Engine):
         "hertz": "pair_style gran model hertz",
         "restitution_damping": "model hertz with coefficientRestitution (Tsuji damping), limitForce on",
         "sliding_friction": "tangential history (Coulomb limit mu*Fn)",
+        "tangential_history_displacement": "tangential history: the total displacement, projected onto the "
+                                           "tangent plane (not rescaled), F_t = k_t(delta) xi (its only form)",
         "rolling_friction": "rolling_friction cdt (constant mu_rol, elastic-plastic torque limit)",
         "plane_wall": "fix wall/gran primitive zplane",
         "cylinder_wall": "fix wall/gran primitive zcylinder",

@@ -42,6 +42,8 @@ class Yade(Engine):
         "restitution_damping": "Mindlin en/es (Tsuji damping); the tensile damping force is not clipped, so e_n = en exactly",
         "low_restitution": "Mindlin en has no lower bound",
         "sliding_friction": "Mindlin shear spring with Coulomb limit",
+        "tangential_history_force": "Law2_ScGeom_MindlinPhys_Mindlin: the shear force, turned with the contact "
+                                    "and incremented by k_t(delta) du_t (its only form)",
         "adhesion": "Mindlin includeAdhesion (DMT, F = 4 pi gamma R*, constant per contact)",
         "plane_wall": "utils.wall",
         "cylinder_wall": "geom.facetCylinder",
