@@ -101,6 +101,9 @@ class Engine(ABC):
     capabilities: dict[str, str] = {}
     #: feature -> {substitute name: description} the engine can offer instead
     substitutes: dict[str, dict[str, str]] = {}
+    #: how the Mindlin spring keeps its history when the case does not say (contact.tangential_history):
+    #: "displacement" or "force"; its capability ``tangential_history_<form>`` describes it
+    tangential_history: str = "displacement"
     #: single-worker throughput [particle-steps/s] for run-time estimates when
     #: benchmarks/throughput.json holds no measurement (ENGINES.md: 2000 dense Hertz spheres)
     throughput: float = 1e6
@@ -154,6 +157,11 @@ class Engine(ABC):
         (r_eff = x50/4), as (term, mechanism, [ratio to the seed's value at each overlap [m] of
         ``overlaps``]) (orchestrator.compare.ladder's single-contact table); empty: exactly."""
         return []
+
+    def tangential_history_of(self, case) -> str:
+        """The Mindlin spring's history in this engine's decks of ``case``: the case's
+        ``contact.tangential_history`` or the engine's own."""
+        return case.contact.tangential_history or self.tangential_history
 
     def required_features(self, case, params) -> list[str]:
         """The features this engine must offer for the case: the scene's (``params.features``),

@@ -188,3 +188,16 @@ def test_in_run_spreads_are_not_compared_as_observables():
                          enumerate(_runs("L0", "lammps", [0.30]) + _runs("L0", "yade", [0.31]))])
     res = compare_rungs(runs, ["L0"])
     assert set(res.comparison["observable"]) == {"mu_macro"}
+
+
+def test_at_l0_the_ladder_names_the_tangential_history_where_the_engines_differ():
+    """No substitute differs at L0; the Mindlin spring's history does between YADE (force) and
+    LIGGGHTS (displacement), not between LAMMPS and LIGGGHTS (both the displacement)."""
+    from orchestrator.compare.ladder import explain
+    runs = pd.DataFrame(_runs("L0", "yade", [0.3]) + _runs("L0", "liggghts", [0.3]) + _runs("L0", "lammps", [0.3]))
+    rows = explain(CASES / "triaxial_small_quasistatic.yaml", "L0", runs)
+    th = rows[rows["term"] == "tangential history"].set_index("engine")
+    assert set(th.index) == {"yade", "liggghts", "lammps"}
+    assert "increment" in th.loc["yade", "mechanism"] and th.loc["liggghts", "note"].startswith("displacement")
+    same = explain(CASES / "triaxial_small_quasistatic.yaml", "L0", runs[runs.engine != "yade"])
+    assert not len(same) or "tangential history" not in set(same["term"])

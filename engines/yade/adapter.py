@@ -57,6 +57,7 @@ class Yade(Engine):
         "contact_output": "O.interactions",
         "periodic": "O.periodic",
     }
+    tangential_history = "force"         # Law2_ScGeom_MindlinPhys_Mindlin increments the shear force
     substitutes = {
         "rolling_friction": {
             "mindlin_moment": "Mindlin includeMoment: one absolute krot for all contacts, limit from |Fn|, no dashpot",

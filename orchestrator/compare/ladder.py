@@ -339,6 +339,8 @@ def explain(case_path, rung: str | None, runs: pd.DataFrame) -> pd.DataFrame:
         for sub in s.get("substitutions") or []:
             subs.append({"term": sub["feature"], "engine": row["engine"], "mechanism": sub["mechanism"],
                          "note": sub.get("note", "")})
+    if not term:
+        subs += tangential_history_rows(case_path, runs[runs["rung"] == rung]["engine"].unique())
     sc = single_contact_differences(case_path)
     key = {"adhesion": "adhesion", "rolling": "rolling limit", "torsion": "torsion limit"}.get(term)
     if key is not None and len(sc):
@@ -346,6 +348,21 @@ def explain(case_path, rung: str | None, runs: pd.DataFrame) -> pd.DataFrame:
     else:
         sc = sc.iloc[0:0]
     return pd.concat([pd.DataFrame(subs), sc], ignore_index=True)
+
+
+def tangential_history_rows(case_path, engines) -> list[dict]:
+    """At L0 no substitute differs, but the Mindlin spring's history may: one row per engine with
+    its form (``Engine.tangential_history_of``) when the engines do not share one. The forms part
+    where a contact's overlap changes under a tangential load (oblique impact at 5°: tangential
+    restitution 0.956 with the displacement, 0.905 with the force; tests/test_tangential_history.py)."""
+    case = load_case(case_path)
+    forms = {e: get_engine(e).tangential_history_of(case) for e in engines}
+    if len(set(forms.values())) < 2:
+        return []
+    return [{"term": "tangential history", "engine": e, "mechanism": get_engine(e).capabilities.get(
+                f"tangential_history_{f}", f),
+             "note": f"{f}; the other form on LAMMPS: contact.tangential_history (docs/crossval.md)"}
+            for e, f in forms.items()]
 
 
 def plot_ladder(res: LadderResult):
