@@ -21,8 +21,15 @@ def wall_rows(run_dir) -> np.ndarray | None:
     """Rows of the deck's wall sampler (``fix ave/time`` into ``walls.<n>.txt``, one file per
     run segment), files in numeric order, or None when there are none."""
     files = sorted(Path(run_dir).glob("walls.*.txt"), key=lambda p: _number(p.name))
-    rows = [a for a in (np.loadtxt(f, comments="#", ndmin=2) for f in files) if a.size]
+    rows = [a for a in (_rows(f) for f in files) if a.size]
     return np.vstack(rows) if rows else None
+
+
+def _rows(path: Path) -> np.ndarray:
+    """The numbers of one sampler file; an empty array for a file with only its header (the last
+    segment of a run ends on the step the previous one sampled)."""
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    return np.loadtxt(lines, ndmin=2) if lines else np.zeros((0, 0))
 
 
 def _number(name: str) -> int:
