@@ -73,6 +73,11 @@ def test_oblique_impact_tells_the_histories_apart(tmp_path, engines_installed):
         m = impact_metrics(Frames(out.run_dir), json.loads((out.run_dir / "params.json").read_text()))
         e_t[(eng, hist)] = m.set_index("angle_deg")["e_t"]
     disp, force = e_t[("lammps", "displacement")], e_t[("lammps", "force")]
+    # `pytest -s -k oblique` prints the table docs/crossval.md quotes
+    print("\nangle  e_t: LAMMPS mindlin  LIGGGHTS  LAMMPS mindlin/force  YADE")
+    for ang in disp.index[disp.index <= 35]:
+        print(f"{ang:5.0f}  {disp[ang]:.4f}  {e_t[('liggghts', None)][ang]:.4f}  {force[ang]:.4f}  "
+              f"{e_t[('yade', None)][ang]:.4f}")
     assert (disp - e_t[("liggghts", None)]).abs().max() < 3e-3
     assert (force - e_t[("yade", None)]).abs().max() < 3e-3
     assert abs(disp[5.0] - force[5.0]) > 0.04                  # sticking: the histories part
