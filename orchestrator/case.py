@@ -251,7 +251,7 @@ class Case(Strict):
     """A simulation case. Everything in SI after loading."""
     #: (section, field) added after runs existed, whose default (None) leaves every deck as it was:
     #: not hashed at that default, so the runs made before them keep their hash (and resume)
-    _UNHASHED_AT_DEFAULT: ClassVar[tuple] = (("contact", "match_overlap"),)
+    _UNHASHED_AT_DEFAULT: ClassVar[tuple] = (("contact", "match_overlap"), ("contact", "tangential_history"))
     name: str
     description: str = ""
     engines: list[str] = Field(default_factory=lambda: list(engine_names()))
