@@ -183,6 +183,12 @@ class Engine(ABC):
             if choice is not None and choice in offered:
                 subs.append(Substitution(f, choice, offered[choice]))
                 continue
+            if f.startswith("tangential_history_"):
+                form = f.removeprefix("tangential_history_")
+                raise UnsupportedFeature(
+                    f"contact.tangential_history: {form}: {self.name} keeps the Mindlin spring's "
+                    f"{self.tangential_history} only; remove the field (each engine's own) or run this case on an "
+                    f"engine with the {form} (`orchestrator engines`; LAMMPS has both)")
             if offered:
                 opts = "; ".join(f"'{k}': {v}" for k, v in offered.items())
                 raise UnsupportedFeature(

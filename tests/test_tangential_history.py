@@ -34,7 +34,7 @@ def test_each_engine_keeps_the_history_it_can(history, accepts, refuses):
         eng.check(eng.required_features(case, params), case.contact.substitutes)
     for name in refuses:
         eng = get_engine(name)
-        with pytest.raises(UnsupportedFeature, match=f"tangential_history_{history}"):
+        with pytest.raises(UnsupportedFeature, match=f"contact.tangential_history: {history}: {name} keeps"):
             eng.check(eng.required_features(case, params), case.contact.substitutes)
 
 
