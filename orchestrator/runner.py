@@ -34,6 +34,7 @@ from .registry import get_engine, get_scene
 from .resources import data_file
 from .stability.monitors import read_verdict
 from .integrity import verify_run, run_record
+from .twins import adopt_twin, find_twin
 
 
 @dataclass
@@ -164,7 +165,10 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
     if force and run_dir.exists():
         if _lock_held(run_dir):
             raise EngineError(f"{run_dir} is being run by another process; wait for it or stop it before --force")
-        shutil.rmtree(run_dir)
+        if run_dir.is_symlink():        # a link to a run with the same engine input (orchestrator.twins)
+            run_dir.unlink()
+        else:
+            shutil.rmtree(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     # under the lock (waiting for a process that runs the same case: its result is then reused)
     with _RunLock(run_dir, wait=True):
@@ -191,7 +195,8 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
             return RunOutcome(run_dir, "complete", old, reused=True)
         if old and old.get("status") == "unstable" and not force:
             return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
-        return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
+        return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params,
+                           twins=not force)
 
 
 class _RunLock:
@@ -218,7 +223,10 @@ class _RunLock:
         self.fh.close()
 
 
-def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params) -> RunOutcome:
+def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params,
+                twins: bool = True) -> RunOutcome:
+    """Prepare, render, run and parse in the locked ``run_dir``. ``twins``: reuse a complete sibling
+    run whose engine input is identical (orchestrator.twins; not under --force, which redoes)."""
     timings = {}
     t0 = time.perf_counter()
     params, subs = prepare(case, engine_name, run_dir, params)
@@ -230,6 +238,14 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         eng.prepare_resume(run_dir, resume)
     deck = eng.render(case, params, run_dir, resume=resume)
     timings["render"] = time.perf_counter() - t0
+    if twins and resume is None and not dry_run and not prior:
+        # a complete run that read exactly these files is this run, whatever its hash (orchestrator.twins)
+        twin = find_twin(run_dir, engine_name, version)
+        if twin is not None:
+            _say(f"{run_dir.name}: the engine input is byte for byte that of the complete run {twin.name}; "
+                 "it is reused")
+            adopt_twin(run_dir, twin)
+            return RunOutcome(run_dir, "complete", read_summary(run_dir), reused=True)
     estimate = estimate_wall_time(case, params, engine_name)
     summary = {
         "case": case.name, "case_source": case.source, "engine": engine_name, "engine_version": version,
