@@ -185,18 +185,24 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
                      + "; ".join(msg for _, msg in damaged))
                 old["analysis_specs"] = None
         if old and old.get("status") == "complete" and (run_dir / "frames.h5").exists() and not force:
-            if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
-                t0 = time.perf_counter()              # the run is reused; its analyses are (re)done
-                old["analysis"] = run_case_analyses(case, run_dir)
-                old["analysis_specs"] = case.analysis
-                old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
-                old["integrity"] = run_record(run_dir, old["analysis"])
-                write_json(run_dir / "summary.json", old)
-            return RunOutcome(run_dir, "complete", old, reused=True)
+            return _reuse(case, run_dir, old, analyze)
         if old and old.get("status") == "unstable" and not force:
             return RunOutcome(run_dir, "unstable", old, reused=True)     # stopped by its monitors: a result
         return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params,
                            twins=not force)
+
+
+def _reuse(case: Case, run_dir: Path, old: dict, analyze: bool) -> RunOutcome:
+    """The outcome of the complete run in ``run_dir`` (summary ``old``), its analyses (re)done when
+    the case asks for others than it has."""
+    if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
+        t0 = time.perf_counter()
+        old["analysis"] = run_case_analyses(case, run_dir)
+        old["analysis_specs"] = case.analysis
+        old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
+        old["integrity"] = run_record(run_dir, old["analysis"])
+        write_json(run_dir / "summary.json", old)
+    return RunOutcome(run_dir, "complete", old, reused=True)
 
 
 class _RunLock:
@@ -245,7 +251,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
             _say(f"{run_dir.name}: the engine input is byte for byte that of the complete run {twin.name}; "
                  "it is reused")
             adopt_twin(run_dir, twin)
-            return RunOutcome(run_dir, "complete", read_summary(run_dir), reused=True)
+            return _reuse(case, run_dir, read_summary(run_dir), analyze)
     estimate = estimate_wall_time(case, params, engine_name)
     summary = {
         "case": case.name, "case_source": case.source, "engine": engine_name, "engine_version": version,

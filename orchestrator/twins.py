@@ -10,8 +10,9 @@ same deck, the same μ_macro to the last digit, ~1.5 h of engine time on three e
 What an engine computes is fixed by what it reads: its deck and the files beside it. After a fresh
 run is prepared and rendered, :func:`find_twin` compares those files (every file in the run
 directory but the orchestrator's own records, :data:`NOT_INPUT`) with each complete sibling run of
-the same engine and version; a sibling whose files are identical *is* this run, and
-:func:`adopt_twin` makes the new run directory a link to it.
+the same engine and version; an intact sibling whose files are identical *is* this run, and
+:func:`adopt_twin` makes the new run directory a link to it (the runner then treats it as any
+complete run: its analyses are redone if the case asks for others).
 """
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ import json
 import os
 import shutil
 from pathlib import Path
+
+from .integrity import verify_run
 
 __all__ = ["input_manifest", "find_twin", "adopt_twin", "NOT_INPUT"]
 
@@ -39,12 +42,12 @@ def input_manifest(run_dir) -> dict[str, str]:
     return out
 
 
-def _same_files(twin: Path, manifest: dict[str, str]) -> bool:
-    for rel, digest in manifest.items():
-        f = twin / rel
-        if not f.is_file() or hashlib.sha256(f.read_bytes()).hexdigest() != digest:
-            return False
-    return True
+def _same_files(twin: Path, fresh: Path, manifest: dict[str, str]) -> bool:
+    """``twin`` holds every file of the manifest with the same bytes (sizes compared first)."""
+    if any(not (twin / rel).is_file() or (twin / rel).stat().st_size != (fresh / rel).stat().st_size
+           for rel in manifest):
+        return False
+    return all(hashlib.sha256((twin / rel).read_bytes()).hexdigest() == digest for rel, digest in manifest.items())
 
 
 def find_twin(run_dir, engine_name: str, engine_version: str) -> Path | None:
@@ -63,7 +66,7 @@ def find_twin(run_dir, engine_name: str, engine_version: str) -> Path | None:
             continue
         if s.get("status") != "complete" or s.get("engine_version") != engine_version:
             continue
-        if _same_files(sib, manifest):
+        if _same_files(sib, run_dir, manifest) and not verify_run(sib, s):     # intact, analyses included
             return sib
     return None
 

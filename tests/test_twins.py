@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.case import load_case
+from orchestrator.integrity import file_record
 from orchestrator.twins import adopt_twin, find_twin, input_manifest
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
@@ -19,8 +20,9 @@ def _run(root: Path, name: str, files: dict, status="complete", version="v1") ->
     for rel, text in files.items():
         (d / rel).parent.mkdir(parents=True, exist_ok=True)
         (d / rel).write_text(text)
-    (d / "summary.json").write_text(json.dumps({"status": status, "engine_version": version}))
     (d / "frames.h5").write_text("frames")
+    (d / "summary.json").write_text(json.dumps({"status": status, "engine_version": version,
+                                                "integrity": {"frames.h5": file_record(d / "frames.h5")}}))
     return d
 
 
@@ -42,6 +44,8 @@ def test_only_a_complete_run_with_the_same_input_files_is_a_twin(tmp_path):
     assert find_twin(new, "liggghts", "v1") == old
     assert find_twin(new, "liggghts", "v2").name == "liggghts-dddd"      # the run of that version
     assert find_twin(new, "liggghts", "v3") is None
+    (tmp_path / "liggghts-dddd" / "frames.h5").write_text("cut")               # damaged: not a twin
+    assert find_twin(new, "liggghts", "v2") is None
     adopt_twin(new, old)
     assert new.is_symlink() and new.resolve() == old.resolve()
     (old / "particles.data").write_text("2 atoms\n")
