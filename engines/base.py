@@ -57,6 +57,11 @@ FEATURES = (
     "tangential_history_force",
 )
 
+#: features that a single case field asks for (the rest follow from the scene and its physics), named
+#: in the refusal of an engine that lacks them
+CASE_FIELDS = {"tangential_history_displacement": "contact.tangential_history: displacement",
+               "tangential_history_force": "contact.tangential_history: force"}
+
 #: engine version per (adapter, executable), probed once per process (Engine.version)
 _VERSIONS: dict = {}
 #: ``<engine>/<scene>.<ext>.j2``: the top-level templates/ folder, shipped as package data
@@ -183,19 +188,15 @@ class Engine(ABC):
             if choice is not None and choice in offered:
                 subs.append(Substitution(f, choice, offered[choice]))
                 continue
-            if f.startswith("tangential_history_"):
-                form = f.removeprefix("tangential_history_")
-                raise UnsupportedFeature(
-                    f"contact.tangential_history: {form}: {self.name} keeps the Mindlin spring's "
-                    f"{self.tangential_history} only; remove the field (each engine's own) or run this case on an "
-                    f"engine with the {form} (`orchestrator engines`; LAMMPS has both)")
             if offered:
                 opts = "; ".join(f"'{k}': {v}" for k, v in offered.items())
                 raise UnsupportedFeature(
                     f"{self.name} has no exact mechanism for '{f}'. Accept a substitute in the case "
                     f"with contact.substitutes: {{{f}: NAME}} (or '{self.name}.{f}: NAME'); {self.name} offers {opts}")
-            raise UnsupportedFeature(f"{self.name} cannot simulate '{f}' and offers no substitute; "
-                                     f"run this case on another engine (engines: [...])")
+            asked = CASE_FIELDS.get(f)
+            raise UnsupportedFeature(f"{self.name} cannot simulate '{f}'"
+                                     + (f" (asked by the case's {asked}; remove it to use {self.name}'s own)" if asked else "")
+                                     + " and offers no substitute; run this case on another engine (engines: [...])")
         return subs
 
     def print_monitors(self, deck_text: str, overlap_limit: float) -> str:
