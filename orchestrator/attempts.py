@@ -91,7 +91,7 @@ class AttemptRecord:
         first = None if first_step is None else int(first_step)
         self.entry = {"first_step": first, "last_step": first, "wall_s": 0.0,
                       "cpu_s": None, "ranks": int(ranks), "load": None, "cores": os.cpu_count(), "done": False}
-        self._loads: list[float] = []
+        self._load_sum, self._load_n = 0.0, 0
         self.earlier = read_attempts(run_dir)
         self._write()
 
@@ -126,10 +126,11 @@ class AttemptRecord:
 
     def _sample_load(self) -> None:
         try:
-            self._loads.append(os.getloadavg()[0])
+            self._load_sum += os.getloadavg()[0]
         except OSError:                 # no load average on this platform
             return
-        self.entry["load"] = round(sum(self._loads) / len(self._loads), 2)
+        self._load_n += 1
+        self.entry["load"] = round(self._load_sum / self._load_n, 2)
 
     def close(self, step: int, cpu_s: float | None, done: bool) -> None:
         """The attempt ended at ``step`` with the engine's reaped CPU time ``cpu_s`` [s]; ``done``:

@@ -140,10 +140,8 @@ def lammps_numbers(params: dict, case=None) -> dict:
     contact = params["scene"].get("contact")
     if contact is not None and case is not None and hasattr(getattr(case.scene, "psd", None), "median"):
         extra = rolling_twisting(contact, case.scene.psd.median, mat["rho"])
-    # contact.tangential_history: force -> mindlin/force (the history is the force, as YADE's); the
-    # default 'mindlin' is the templates' own and left out, so the runs made before keep their hash
-    tangential = tangential_model(params)
-    return {**extra, **({"tangential": tangential} if tangential != "mindlin" else {}),
+    return {**extra,
+        "tangential": tangential_model(params),   # mindlin, or mindlin/force (contact.tangential_history)
         "damping": d,
         "pair": {"E": mat["E"], "nu": mat["nu"], "kt": 8.0 * params["G_eff_pp"],
                  "xgt": tangential_damping_factor(params["E_eff_pp"], params["G_eff_pp"])},
