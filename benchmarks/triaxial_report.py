@@ -62,10 +62,8 @@ def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floo
     within 0.01); the slab hull's largest difference for slabs of ``slabs`` d50 (how much the
     choice matters); the sample's radial extent (largest and 95th-percentile grain distance from
     the axis through the grains' mean x, y [mm]) at a third of the loading frames and at the last;
-    and its ``neck`` at the last frame: the depth [d50] of the deepest waist of the outline (per
-    tenth of the height, the mean over 8 sectors of the farthest grain surface from the axis,
-    below the lesser of the widest tenth under it and the widest above it), which the global hull
-    bridges and the slab hull follows."""
+    and, at the reference frame and the last, its outline (:func:`outline`) and the depth of its
+    deepest waist (:func:`neck_depth`), which the global hull bridges and the slab hull follows."""
     if not (run / "frames.h5").exists():
         return {}
     from orchestrator.frames import Frames
@@ -109,12 +107,15 @@ def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floo
         extent[f"frame {int(k)} (ε_a {float(c['axial_strain'][k]):.3f})"] = [round(float(np.nanmax(rr)) * 1e3, 3),
                                                                               round(float(np.nanpercentile(rr, 95)) * 1e3, 3)]
     out["radial_extent_max_p95_mm"] = extent
-    out["neck_d50"] = {f"ε_a {float(c['axial_strain'][k]):.3f}": neck_depth(f.position[k], r, d50) for k in (ref, ld[-1])}
+    shapes = {f"ε_a {float(c['axial_strain'][k]):.3f}": outline(f.position[k], r, d50) for k in (ref, ld[-1])}
+    out["neck_d50"] = {k: neck_depth(R) for k, R in shapes.items()}
+    out["outline_d50_foot_to_top"] = {k: [round(float(v), 2) for v in R] for k, R in shapes.items()}
     return out
 
 
-def neck_depth(pos: np.ndarray, r: np.ndarray, d50: float, tenths: int = 10, sectors: int = 8) -> float:
-    """Depth [d50] of the outline's deepest waist (volume_methods): 0 for a barrel or a cylinder."""
+def outline(pos: np.ndarray, r: np.ndarray, d50: float, tenths: int = 10, sectors: int = 8) -> np.ndarray:
+    """The sample's outline [d50], foot to top: per tenth of the height, the mean over ``sectors``
+    of the farthest grain surface from the axis through the grains' mean x, y."""
     ok = ~np.isnan(pos).any(axis=1)
     x, rr = pos[ok], r[ok]
     cx, cy = x[:, 0].mean(), x[:, 1].mean()
@@ -123,9 +124,15 @@ def neck_depth(pos: np.ndarray, r: np.ndarray, d50: float, tenths: int = 10, sec
     sector = ((np.arctan2(x[:, 1] - cy, x[:, 0] - cx) + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
     reach = np.zeros((tenths, sectors))
     np.maximum.at(reach, (band, sector), np.hypot(x[:, 0] - cx, x[:, 1] - cy) + rr)
-    R = reach.mean(axis=1)
-    depth = [min(R[:i].max(), R[i + 1:].max()) - R[i] for i in range(1, tenths - 1)]
-    return round(max(0.0, float(max(depth))) / d50, 3)
+    return reach.mean(axis=1) / d50
+
+
+def neck_depth(R: np.ndarray) -> float:
+    """Depth [the outline's unit] of the deepest waist of an :func:`outline` ``R``: how far a tenth
+    lies inside the lesser of the widest tenth below it and the widest above it; 0 for a barrel or
+    a cylinder."""
+    depth = [min(R[:i].max(), R[i + 1:].max()) - R[i] for i in range(1, len(R) - 1)]
+    return round(max(0.0, float(max(depth))), 3)
 
 
 def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int = 10) -> dict:
