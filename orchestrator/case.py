@@ -118,6 +118,12 @@ class Contact(Strict):
                           "(the force, incremented by k_t(δ) Δξ each step: YADE, LAMMPS mindlin/force); the two "
                           "differ when the overlap changes under a tangential load. None: each engine's own "
                           "(docs/crossval.md)")
+    tangential_damping: bool | None = Field(
+        None, description="false: no viscous dashpot on the tangential spring (normal damping only). The "
+                          "engines cap the sticking contact's force differently when it has one: LIGGGHTS and "
+                          "YADE test only the spring against μF_n and add the dashpot on top, LAMMPS caps spring "
+                          "+ dashpot at μF_n; without it all three realise the same law (docs/crossval.md). "
+                          "None: on, as each engine's Hertz-Mindlin law has it")
     adhesion: Adhesion | None = None
     rolling: RollingFriction | None = None
     torsion: TorsionFriction | None = None
@@ -251,7 +257,8 @@ class Case(Strict):
     """A simulation case. Everything in SI after loading."""
     #: (section, field) added after runs existed, whose default (None) leaves every deck as it was:
     #: not hashed at that default, so the runs made before them keep their hash (and resume)
-    _UNHASHED_AT_DEFAULT: ClassVar[tuple] = (("contact", "match_overlap"), ("contact", "tangential_history"))
+    _UNHASHED_AT_DEFAULT: ClassVar[tuple] = (("contact", "match_overlap"), ("contact", "tangential_history"),
+                                               ("contact", "tangential_damping"))
     name: str
     description: str = ""
     engines: list[str] = Field(default_factory=lambda: list(engine_names()))

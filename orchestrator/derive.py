@@ -102,6 +102,7 @@ def derive(case) -> Params:
         E_eff_pp=E_pp, E_eff_pw=E_pw, G_eff_pp=G_pp, G_eff_pw=G_pw,
         restitution=Restitution(target=e_target, damping_ratio=zeta),
         friction=case.contact.friction, tangential_stiffness_ratio=case.contact.tangential_stiffness_ratio,
+        tangential_damping=case.contact.tangential_damping is not False,
         r_min=r_min, r_max=r_max, dt=dt, dt_rayleigh=dt_R, dt_hertz=dt_H, dt_critical=dt_crit,
         dt_fraction=dt / dt_crit, v_max=v_max, dt_damping_factor=damping_factor,
         gravity=case.gravity, gravity_vector=[0.0, 0.0, -case.gravity],

@@ -194,6 +194,7 @@ class Params(Frozen):
     restitution: Restitution
     friction: float               #: Coulomb μ [-]
     tangential_stiffness_ratio: float | None   #: k_t/k_n when the case sets it [-]
+    tangential_damping: bool          #: the tangential spring has its viscous dashpot (contact.tangential_damping)
     r_min: float                  #: smallest particle radius [m]
     r_max: float                  #: largest particle radius [m]
     dt: float                     #: time step [s]

@@ -13,6 +13,20 @@ import numpy as np
 from .contact_law import remembered
 
 
+#: mantissa bits kept by :func:`portable` (relative step 2^-32 ≈ 2e-10)
+PORTABLE_BITS = 32
+
+
+def portable(x: np.ndarray) -> np.ndarray:
+    """``x`` with its mantissas rounded to :data:`PORTABLE_BITS` bits (exact power-of-two arithmetic).
+    NumPy's vectorised ``exp`` takes a different SIMD path on CPUs with AVX-512 (SVML) than on the
+    others and differs from it by an ulp in ~5 % of the values; rounded, the same seed draws the same
+    diameters, hence the same packing, on every x86 CPU (a 1-ulp change crosses a rounding step with
+    probability ~2^-20, once in ~2e7 diameters)."""
+    m, e = np.frexp(np.asarray(x, dtype=float))
+    return np.ldexp(np.round(m * 2.0 ** PORTABLE_BITS) / 2.0 ** PORTABLE_BITS, e)
+
+
 def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: float, d_max: float,
                         rng, median: float | None = None) -> np.ndarray:
     """``n`` diameters [m] with ln d ~ N(``mu_ln``, ``sigma_ln``²) truncated to [``d_min``, ``d_max``]
@@ -34,6 +48,7 @@ def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: flo
         # the same law either way; the two forms differ by an ulp and keep each caller's draws
         # bit-identical to what it drew before the samplers were folded into one (golden decks)
         d = np.exp(mu_ln + sigma_ln * z) if median is None else median * np.exp(sigma_ln * z)
+        d = portable(d)
         out = np.concatenate([out, d[(d >= d_min) & (d <= d_max)]])
     return out[:n]
 

@@ -131,6 +131,12 @@ def tangential_model(params: dict, base: str = "mindlin") -> str:
     return "mindlin/force"
 
 
+def dashpot(params: dict, xgt: float) -> float:
+    """``x_γt`` as given, or 0 when the case drops the tangential dashpot (``contact.tangential_damping:
+    false``, params ``tangential_damping``): LAMMPS' tangential damping is x_γt times the normal one."""
+    return xgt if params.get("tangential_damping", True) else 0.0
+
+
 def lammps_numbers(params: dict, case=None) -> dict:
     """The numbers the LAMMPS templates need beyond ``params`` (SI); ``case`` for the scenes with
     rolling and twisting resistance (their median diameter)."""
@@ -144,9 +150,9 @@ def lammps_numbers(params: dict, case=None) -> dict:
         "tangential": tangential_model(params),   # mindlin, or mindlin/force (contact.tangential_history)
         "damping": d,
         "pair": {"E": mat["E"], "nu": mat["nu"], "kt": 8.0 * params["G_eff_pp"],
-                 "xgt": tangential_damping_factor(params["E_eff_pp"], params["G_eff_pp"])},
+                 "xgt": dashpot(params, tangential_damping_factor(params["E_eff_pp"], params["G_eff_pp"]))},
         "wall": {"E": wall_young(params["E_eff_pw"], mat["nu"]), "nu": mat["nu"], "kt": 8.0 * params["G_eff_pw"],
-                 "xgt": tangential_damping_factor(params["E_eff_pw"], params["G_eff_pw"])},
+                 "xgt": dashpot(params, tangential_damping_factor(params["E_eff_pw"], params["G_eff_pw"]))},
     }
 
 
@@ -219,7 +225,7 @@ def shear_cell_law(params: dict, case, damping: str) -> dict:
         xi = c["expected_overlap"]
         xgt = 2.0 * math.sqrt(kt * m_eff) / (eta * m_eff * math.sqrt(R_eff * xi))
         out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": eta, "tangential": tangential_model(params, "linear_history"),
-                       "kt": kt, "xgt": xgt, "mu": params["friction"], "damping_model": "viscoelastic"}
+                       "kt": kt, "xgt": dashpot(params, xgt), "mu": params["friction"], "damping_model": "viscoelastic"}
         eta_w = viscoelastic_eta(seed_gamma_n(E_pw, m50), m50, r50)
         out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": eta_w,
                        "damping_model": "viscoelastic"}
@@ -227,12 +233,12 @@ def shear_cell_law(params: dict, case, damping: str) -> dict:
         d = restitution_damping({"restitution": {"target": c["restitution"]["target"]}})
         model = "coeff_restitution" + (" limit_damping" if d["limit_damping"] else "")
         out["pair"] = {"E": mat["E"], "nu": mat["nu"], "damp": d["e_input"], "tangential": tangential_model(params),
-                       "kt": 8.0 * params["G_eff_pp"], "xgt": tangential_damping_factor(E_pp, params["G_eff_pp"]),
+                       "kt": 8.0 * params["G_eff_pp"], "xgt": dashpot(params, tangential_damping_factor(E_pp, params["G_eff_pp"])),
                        "mu": params["friction"], "damping_model": model}
         out["wall"] = {"E": wall_young(E_pw, mat["nu"]), "nu": mat["nu"], "damp": d["e_input"],
                        "damping_model": model}
     frictional = {"tangential": tangential_model(params), "kt": 8.0 * params["G_eff_pw"],
-                  "xgt": tangential_damping_factor(E_pw, params["G_eff_pw"]), "mu": out["wall_mu"]}
+                  "xgt": dashpot(params, tangential_damping_factor(E_pw, params["G_eff_pw"])), "mu": out["wall_mu"]}
     frictionless = {"tangential": "linear_nohistory", "kt": None, "xgt": 0.0, "mu": 0.0}
     if out["wall_mu"] > 0 and sc.get("wall_friction_from", 0) > 0:
         # scene.wall_friction: shear: frictionless until the shear stage, the wall fixes redefined there
