@@ -109,6 +109,11 @@ class Engine(ABC):
     #: how the Mindlin spring keeps its history when the case does not say (contact.tangential_history):
     #: "displacement" or "force"; its capability ``tangential_history_<form>`` describes it
     tangential_history: str = "displacement"
+    #: what a sticking contact's Coulomb test weighs against μF_n while the tangential spring has a
+    #: dashpot (contact.tangential_damping): "spring" (the dashpot added on top, the total may exceed
+    #: μF_n: LIGGGHTS' tangential_model_history, YADE's Law2_ScGeom_MindlinPhys_Mindlin) or "spring +
+    #: dashpot" (the total capped: LAMMPS' pair granular)
+    coulomb_limit_on: str = "spring"
     #: single-worker throughput [particle-steps/s] for run-time estimates when
     #: benchmarks/throughput.json holds no measurement (ENGINES.md: 2000 dense Hertz spheres)
     throughput: float = 1e6

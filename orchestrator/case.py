@@ -138,6 +138,11 @@ class Contact(Strict):
                     "contacts sat at a mean 0.56 ξ_σ (docs/crossval.md). The rolling limit μ_r, shared by "
                     "every engine, stays at ξ_σ")
 
+    @field_validator("tangential_damping")
+    @classmethod
+    def _dashpot_on_is_the_default(cls, v):
+        return None if v is True else v      # true is the engines' own law: the same run as unset
+
     @field_validator("restitution")
     @classmethod
     def _restitution(cls, v):

@@ -51,6 +51,7 @@ def find_lmp() -> str | None:
 
 
 class Lammps(Engine):
+    coulomb_limit_on = "spring + dashpot"   # GranSubModTangentialMindlin: |F_spring + F_dashpot| <= μF_n
     name = "lammps"
     executable = "lmp"
     #: LIGGGHTS' figure times the ratio measured on plane_shear_smoke (150 grains, 17 391 steps,

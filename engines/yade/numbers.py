@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orchestrator.contact_law import DerivationError, tsuji_beta
+from orchestrator.contact_law import DerivationError
 from orchestrator.params import Frozen, Params, opt
 
 #: Mindlin's r_eff at a wall, as a fraction of the sphere's radius
@@ -57,9 +57,7 @@ class YadeNumbers(Frozen):
     """The YADE templates' own numbers (``engine`` in the templates)."""
     restitution_input: float                      #: Mindlin ``en`` = ``es`` [-]
     contact_restitution_input: float | None = opt("``en`` for the scene's own contact restitution [-]")
-    betan: float | None = opt("Mindlin ``betan`` for ``restitution_input`` when the case drops the tangential "
-                              "dashpot (contact.tangential_damping: false), with ``betas`` = 0 [-]")
-    contact_betan: float | None = opt("the same for ``contact_restitution_input`` [-]")
+    tangential_damping: bool = True               #: Mindlin ``es`` = ``en`` (else ``es`` = 1: betas = 0)
     wall_young: float | None = opt("facet walls' Young's modulus [Pa] (shear cell)")
     gamma: float | None = opt("DMT surface energy γ [J/m²]")
     eta: float | None = opt("rolling limit η: M_max = η R̄ |F_n| [-]")
@@ -70,15 +68,6 @@ class YadeNumbers(Frozen):
     plane_spheres: tuple | None = opt("impact on a plane: centre (x, y, z) [m] of each plane sphere")
     plane_sphere_radius: float | None = opt("their radius [m]")
     platen_radius: float | None = opt("triaxial: radius of the platen spheres [m]")
-
-
-def mindlin_betan(e: float) -> float:
-    """Mindlin's ``betan`` that gives the same normal dashpot as ``en`` = e, so that ``betas`` can be
-    set apart. With ``en`` Ip2_FrictMat_FrictMat_MindlinPhys sets Tsuji's α = 2√(5/6)|β(e)|√(2E*√R*)
-    and Law2_ScGeom_MindlinPhys_Mindlin damps c_n = α√m* δ^1/4 and the shear with c_s = c_n; with
-    ``betan`` it damps c_n = 2 betan √(m* k_n), k_n = 3/2 k_no √δ = 2E*√(R*δ), i.e. the same c_n for
-    betan = √(5/6)|β(e)| (HertzMindlin.cpp; Tsuji et al. 1992), and c_s = 2 betas √(m* k_s)."""
-    return math.sqrt(5.0 / 6.0) * abs(tsuji_beta(e))
 
 
 def yade_numbers(case, params: Params) -> YadeNumbers:
@@ -112,11 +101,8 @@ def yade_numbers(case, params: Params) -> YadeNumbers:
         out["plane_sphere_radius"] = Rb
     elif kind == "triaxial" and sc.radius0 is not None:
         out["platen_radius"] = PLATEN_SPHERE_FACTOR * sc.radius0
-    if not params.tangential_damping:
-        out["betan"] = mindlin_betan(params.restitution.target)
-        if out.get("contact_restitution_input") is not None:
-            out["contact_betan"] = mindlin_betan(out["contact_restitution_input"])
-    return YadeNumbers(restitution_input=params.restitution.target, **out)
+    return YadeNumbers(restitution_input=params.restitution.target, tangential_damping=params.tangential_damping,
+                       **out)
 
 
 def seed_term_ratios(case, params: Params, xs) -> list:

@@ -339,7 +339,8 @@ def explain(case_path, rung: str | None, runs: pd.DataFrame) -> pd.DataFrame:
             subs.append({"term": sub["feature"], "engine": row["engine"], "mechanism": sub["mechanism"],
                          "note": sub.get("note", "")})
     if not term:
-        subs += tangential_history_rows(case_path, runs[runs["rung"] == rung]["engine"].unique())
+        engines = runs[runs["rung"] == rung]["engine"].unique()
+        subs += tangential_history_rows(case_path, engines) + tangential_dashpot_rows(case_path, engines)
     sc = single_contact_differences(case_path)
     key = {"adhesion": "adhesion", "rolling": "rolling limit", "torsion": "torsion limit"}.get(term)
     if key is not None and len(sc):
@@ -362,6 +363,24 @@ def tangential_history_rows(case_path, engines) -> list[dict]:
                 f"tangential_history_{f}", f),
              "note": f"{f}; the other form on LAMMPS: contact.tangential_history (docs/crossval.md)"}
             for e, f in forms.items()]
+
+
+def tangential_dashpot_rows(case_path, engines) -> list[dict]:
+    """At L0 the engines may also cap a sticking contact differently: with a tangential dashpot,
+    LIGGGHTS and YADE test the spring alone against μF_n and add the dashpot on top, LAMMPS caps spring
+    + dashpot (``Engine.coulomb_limit_on``). One row per engine when the case has a damped, frictional
+    tangential spring and the engines do not share the cap. Oblique impact at e_n = 0.5: tangential
+    restitution up to 0.09 apart with the dashpot, within 0.002 without it
+    (tests/test_tangential_damping.py); ``contact.tangential_damping: false`` runs the same law on all."""
+    c = load_case(case_path).contact
+    if c.tangential_damping is False or c.friction == 0 or (c.damping == "restitution" and c.restitution >= 1):
+        return []
+    caps = {e: get_engine(e).coulomb_limit_on for e in engines}
+    if len(set(caps.values())) < 2:
+        return []
+    return [{"term": "tangential dashpot", "engine": e, "mechanism": f"Coulomb limit on the {cap}",
+             "note": "contact.tangential_damping: false gives every engine the same law (docs/crossval.md)"}
+            for e, cap in caps.items()]
 
 
 def plot_ladder(res: LadderResult):
