@@ -104,7 +104,8 @@ def _closing_results(run_dir, con) -> None:
 def cmd_clock(args) -> int:
     """``orchestrator clock show|refresh``: the fitted cost model per engine and scene."""
     from rich.table import Table
-    from .clock import load_table, package_table_path, refresh, samples_from_runs, user_table_path
+    from .clock import (load_table, machine_factor, machine_id, package_table_path, refresh, samples_from_runs,
+                        speed_table_path, user_table_path)
     con = _console()
     if args.action == "refresh":
         missing = [r for r in args.runs if not Path(r).exists()]
@@ -129,6 +130,10 @@ def cmd_clock(args) -> int:
             t.add_row(eng, sc, f"{tp.startup_s:.2f}", f"{tp.per_step_s * 1e6:.1f}", f"{tp.per_particle_step_s * 1e9:.1f}",
                       f"{tp.exponent:.2f}", f"{tp.parallel_efficiency:.2f}", str(tp.runs), tp.note)
     con.print(t)
+    speeds = {eng: machine_factor(eng) for eng in sorted(load_table())}
+    said = [f"{eng} × {f:.2f} ({k} run(s))" for eng, (f, k) in ((e, v) for e, v in speeds.items() if v)]
+    con.print(f"this machine ({machine_id()}): " + ("; ".join(said) + " of the package table's times"
+              if said else "no complete run recorded yet") + f" ({speed_table_path()})", markup=False)
     return 0
 
 

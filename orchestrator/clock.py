@@ -36,6 +36,14 @@ then ``a = 0`` and the fit is flagged ``one size``.
 The table lives in package data (``benchmarks/throughput.json``, shipped through
 ``orchestrator/_data``); a user table in ``$ORCHESTRATOR_THROUGHPUT`` or
 ``$XDG_DATA_HOME/orchestrator/throughput.json`` takes precedence.
+
+**This machine's speed.** The package table was measured on one machine; another runs the same
+decks faster or slower (a newer 2-core machine ran the small shear cell on LIGGGHTS in 0.48 of the
+table's time). Every complete run that did not share its cores records its engine time over the
+package table's prediction for it, per engine, under this machine's CPU
+(:func:`record_speed`, ``machine_speed.json`` beside the user table); estimates from the package
+table are multiplied by the median of the last :data:`SPEED_KEEP` (:func:`machine_factor`), and say
+so. Entries of a user table (refitted on this machine) are taken as they are.
 ``orchestrator clock refresh RUNS…`` refits it from the ``summary.json`` of complete runs (in a
 checkout, ``--package`` writes the shipped table itself).
 """
@@ -43,6 +51,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -56,7 +65,8 @@ from .resources import data_file
 
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "expected_steps", "step_plan",
            "samples_from_runs", "fit",
-           "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY"]
+           "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
+           "machine_id", "record_speed", "machine_factor", "speed_table_path"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -141,37 +151,117 @@ def user_table_path() -> Path:
     return base / "orchestrator" / "throughput.json"
 
 
-def load_table() -> dict:
-    """``{engine: {scene: Throughput}}``: the package table, overridden entry by entry by the
-    user table."""
-    table = _package_table()
+def _user_table() -> dict:
     user = user_table_path()
     try:
-        user_text = user.read_text() if user.is_file() else None
-    except OSError:            # another user's table (HOME kept under sudo/su): not ours to read
-        user_text = None
-    if user_text:
-        for eng, scenes in json.loads(user_text).items():
-            table.setdefault(eng, {}).update(scenes)
+        return json.loads(user.read_text()) if user.is_file() else {}
+    except (OSError, ValueError):   # another user's table (HOME kept under sudo/su): not ours to read
+        return {}
+
+
+def _as_throughputs(table: dict) -> dict:
     return {eng: {sc: Throughput(**d) for sc, d in scenes.items() if not sc.startswith("_")}
             for eng, scenes in table.items() if not eng.startswith("_")}
 
 
+def load_table() -> dict:
+    """``{engine: {scene: Throughput}}``: the package table, overridden entry by entry by the
+    user table."""
+    table = _package_table()
+    for eng, scenes in _user_table().items():
+        table.setdefault(eng, {}).update(scenes)
+    return _as_throughputs(table)
+
+
+#: runs per engine whose speed ratio :func:`machine_factor` keeps (the most recent)
+SPEED_KEEP = 25
+
+
+def machine_id() -> str:
+    """This machine's CPU model and core count (``/proc/cpuinfo``): the key of its speed record."""
+    model = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model or platform.processor() or platform.machine()} x{os.cpu_count()}"
+
+
+def speed_table_path() -> Path:
+    """``$ORCHESTRATOR_MACHINE_SPEED``, or ``machine_speed.json`` beside the user table."""
+    if os.environ.get("ORCHESTRATOR_MACHINE_SPEED"):
+        return Path(os.environ["ORCHESTRATOR_MACHINE_SPEED"])
+    return user_table_path().with_name("machine_speed.json")
+
+
+def _speed_table() -> dict:
+    try:
+        p = speed_table_path()
+        return json.loads(p.read_text()) if p.is_file() else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def record_speed(run_dir) -> float | None:
+    """Record the complete run ``run_dir``'s engine time over the package table's prediction for it
+    (its engine, scene, particles, steps run and ranks) under this machine; returns the ratio, or
+    None when the run does not tell (not complete, shared its cores, or no package entry)."""
+    smp = _sample(Path(run_dir))
+    if smp is None or smp.shared or smp.engine_s <= 0:
+        return None
+    tp = _as_throughputs(_package_table()).get(smp.engine, {}).get(smp.scene)
+    if tp is None:
+        return None
+    predicted = tp.engine_time(smp.n_particles, smp.steps, smp.ranks)
+    if not predicted > 0:
+        return None
+    ratio = smp.engine_s / predicted
+    table = _speed_table()
+    rows = table.setdefault(machine_id(), {}).setdefault(smp.engine, [])
+    rows[:] = [r for r in rows if r.get("run") != str(run_dir)] + [{"run": str(run_dir), "scene": smp.scene,
+                                                                      "ratio": round(ratio, 4)}]
+    del rows[:-SPEED_KEEP]
+    out = speed_table_path()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_text(out, json.dumps(table, indent=1, sort_keys=True) + "\n")
+    return ratio
+
+
+def machine_factor(engine: str) -> tuple[float, int] | None:
+    """(median ratio of engine time to the package table's prediction, runs) of ``engine`` on this
+    machine (:func:`record_speed`); None before a run has been recorded."""
+    rows = _speed_table().get(machine_id(), {}).get(engine) or []
+    ratios = [float(r["ratio"]) for r in rows if isinstance(r.get("ratio"), (int, float)) and r["ratio"] > 0]
+    return (float(np.median(ratios)), len(ratios)) if ratios else None
+
+
 def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, ranks: int = 1,
-                         table: dict | None = None, plan=None) -> tuple[float, str]:
+                         table: dict | None = None, plan=None, machine_speed: bool | None = None) -> tuple[float, str]:
     """(engine wall time [s], basis) for one run of at most ``steps`` steps. ``basis`` says where the
     figures came from: the fitted (engine, scene) entry, or the engine's entry of another scene, or
     nothing. With the scene's ``plan`` (:func:`step_plan`) the steps are those the measured runs
-    took (:func:`expected_steps`)."""
+    took (:func:`expected_steps`). ``machine_speed``: scale an entry of the package table by this
+    machine's measured speed (:func:`machine_factor`); default: when ``table`` is the default one."""
+    scale, note = 1.0, ""
+    if machine_speed is None:
+        machine_speed = table is None
     table = load_table() if table is None else table
+    if machine_speed:
+        mf = machine_factor(engine)
+        if mf is not None and scene not in _user_table().get(engine, {}):
+            scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
     scenes = table.get(engine, {})
     if scene in scenes:
         tp = scenes[scene]
-        return (tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
-                f"measured on {tp.runs} {engine} {scene} run(s)")
+        return (scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
+                f"measured on {tp.runs} {engine} {scene} run(s){note}")
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
-        return tp.engine_time(n_particles, steps, ranks), f"no {scene} run measured on {engine}: slowest other scene"
+        return (scale * tp.engine_time(n_particles, steps, ranks),
+                f"no {scene} run measured on {engine}: slowest other scene{note}")
     return float("nan"), f"no throughput measured for {engine}"
 
 

@@ -24,6 +24,7 @@ from engines.render import templates_hash
 
 from .atomic import write_json, write_text
 from .attempts import clear_attempts, read_attempts
+from .clock import record_speed
 from .case import Case, case_from_dict
 from .derive import derive
 from .sizing import estimate_wall_time
@@ -322,6 +323,10 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     # only now, with the complete summary on disk, are the resume points no longer needed
     summary["resume_points_removed_bytes"] = drop_resume_points(run_dir)
     write_json(run_dir / "summary.json", summary)
+    try:                        # this machine's speed for the next estimates (orchestrator.clock)
+        record_speed(run_dir)
+    except (OSError, ValueError, TypeError) as exc:
+        _say(f"the run's speed was not recorded for the run-time estimates: {exc}")
     return RunOutcome(run_dir, "complete", summary)
 
 

@@ -66,7 +66,7 @@ def estimate(case, params: dict, engine: str) -> dict:
     frames_bytes = frames * n * cols * 8
     eng = get_engine(engine)
     table = load_table()
-    t_engine, basis = engine_time_estimate(case, params, engine, table=table)
+    t_engine, basis = engine_time_estimate(case, params, engine, table=table, machine_speed=True)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
     steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), table.get(engine, {}).get(case.scene.kind))
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
@@ -148,7 +148,8 @@ def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
 BARE_BASIS = "from the bare engine's throughput, no run of this engine measured: a lower bound, decks run slower"
 
 
-def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict | None = None) -> tuple[float, str]:
+def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict | None = None,
+                         machine_speed: bool | None = None) -> tuple[float, str]:
     """(engine wall time [s], basis) estimated from the derived step count and particle count with
     the cost model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps
     (a + b n) / S(workers) per engine and scene); an engine never measured falls back to the
@@ -159,7 +160,7 @@ def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict
     n = integrated_particles(params)
     steps = sc.get("total_steps", sc["steps"])
     t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case),
-                                    table=table, plan=step_plan(case.scene.kind, sc))
+                                    table=table, plan=step_plan(case.scene.kind, sc), machine_speed=machine_speed)
     if t == t:         # not NaN: a measured model
         return t, basis
     return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case)), BARE_BASIS

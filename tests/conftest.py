@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -12,6 +13,10 @@ import pytest
 # the two cores, and OpenBLAS threads spinning beside them slowed a small lstsq (the CT shape fit)
 # from 0.04 s to 1.7 s on a busy machine
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# the engine runs of the suite record this machine's speed (orchestrator.clock.record_speed) in a
+# file of their own, so that neither the user's record nor the estimates the tests check change
+os.environ.setdefault("ORCHESTRATOR_MACHINE_SPEED",
+                      os.path.join(tempfile.mkdtemp(prefix="orchestrator-speed-"), "machine_speed.json"))
 
 REPO = Path(__file__).resolve().parents[1]
 CASES = REPO / "cases"

@@ -216,3 +216,39 @@ def test_three_sizes_on_a_curve_fit_a_power_law_and_each_size_counts_once():
            for n in (100, 1000, 10000)]
     tl = fit(lin)
     assert tl.exponent == 1.0 and tl.per_step_s == pytest.approx(2e-4, rel=1e-6)
+
+
+def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypatch):
+    """A quiet run that took 0.44 of the package table's prediction (LIGGGHTS' small shear cell on
+    a newer 2-core machine, 27 Nov 2026) scales the next estimates from the package table by its
+    median, and says so; a run that shared its cores, or an entry of a user table, is left alone."""
+    from orchestrator.clock import _package_table, machine_factor, record_speed
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))
+    tp = Throughput(**_package_table()["liggghts"]["shear_cell"])
+    n, steps = 1025, 383_546
+    before, basis = estimate_engine_time("liggghts", "shear_cell", n, steps, 2)
+    assert before == pytest.approx(tp.engine_time(n, steps, 2)) and "machine" not in basis
+
+    def run(name, ratio, load):
+        d = tmp_path / "runs" / name
+        d.mkdir(parents=True)
+        t = ratio * tp.engine_time(n, steps, 2)
+        (d / "summary.json").write_text(json.dumps({
+            "engine": "liggghts", "status": "complete", "steps": steps, "steps_run": steps, "n_particles": n,
+            "workers": 2, "wall_time": {"engine": t, "engine_loop": t - tp.startup_s}}))
+        (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
+        (d / "case.yaml").write_text("scene: {kind: shear_cell}\n")
+        (d / "attempts.json").write_text(json.dumps([{"cores": 2, "load": load, "wall_s": t, "done": True}]))
+        return record_speed(d)
+
+    assert run("quiet-1", 0.44, 2.0) == pytest.approx(0.44, rel=1e-3)
+    assert run("quiet-2", 0.50, 2.1) == pytest.approx(0.50, rel=1e-3)
+    assert run("shared", 1.50, 4.0) is None                  # two ranks beside other runs: wall time too long
+    assert machine_factor("liggghts") == (pytest.approx(0.47, rel=1e-3), 2)
+    after, basis = estimate_engine_time("liggghts", "shear_cell", n, steps, 2)
+    assert after == pytest.approx(0.47 * before, rel=1e-3) and "× 0.47 for this machine's speed (2 run(s))" in basis
+    (tmp_path / "user.json").write_text(json.dumps({"liggghts": {"shear_cell": {
+        "startup_s": 1.0, "per_step_s": 0.0, "per_particle_step_s": 1e-7}}}))
+    t_user, basis = estimate_engine_time("liggghts", "shear_cell", n, steps)
+    assert t_user == pytest.approx(1.0 + steps * 1e-7 * n) and "machine" not in basis
