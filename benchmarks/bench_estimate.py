@@ -9,7 +9,10 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
 
 - ``table``: with the shipped/user table as it is (what ``validate`` and ``run --dry-run`` print);
 - ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
-  predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind).
+  predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind);
+- ``machine``: the package table times this machine's speed as the *other* quiet runs of the same
+  engine given here measure it (the median of their :func:`orchestrator.clock.speed_ratio`: what
+  ``run --dry-run`` prints once the machine has recorded them; "n/a" without such a run).
 
 ``load`` is the machine's mean load average over the run's cores (``orchestrator.attempts``; "-"
 for runs recorded before it was kept). A multi-rank run with a load above its cores by more than
@@ -26,7 +29,9 @@ import math
 from pathlib import Path
 
 from orchestrator.case import load_case
-from orchestrator.clock import estimate_engine_time, expected_steps, fit, load_table, samples_from_runs
+import numpy as np
+
+from orchestrator.clock import estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_ratio
 from orchestrator.runner import run_case
 
 HERE = Path(__file__).resolve().parent
@@ -50,7 +55,8 @@ def main(argv=None) -> int:
     samples = samples_from_runs(roots)
     table = load_table()
     print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'w':>2s} {'actual s':>9s} "
-          f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'load':>9s}  run")
+          f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'machine':>7s} {'load':>9s}  run")
+    package = _package()
     worst = worst_quiet = None
     for s in samples:
         # what `run --dry-run` printed before the run: the step budget, or where the scene decides its
@@ -62,19 +68,29 @@ def main(argv=None) -> int:
         loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
+        ratios = [r for o in samples if o.engine == s.engine and o.source != s.source
+                  for r in [speed_ratio(o)] if r is not None]
+        pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
+        r3 = float(np.median(ratios)) * pk / s.engine_s if ratios and pk == pk else math.nan
         if r2 == r2:
             worst = max(worst or 0.0, abs(r2 - 1))
             if not s.shared:
                 worst_quiet = max(worst_quiet or 0.0, abs(r2 - 1))
         load = "-" if s.load is None else f"{s.load:.1f}/{s.cores}"
         print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {s.ranks:2d} {s.engine_s:9.1f} "
-              f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {load:>9s}  {Path(s.source).name}"
+              f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {r3:7.2f} {load:>9s}  {Path(s.source).name}"
               + ("  shared" if s.shared else ""))
     print("largest leave-one-out error: " + (f"{100 * worst:.0f} % (floor: 30 %)" if worst is not None
           else "n/a (no run has another of its engine and scene to be predicted from)"))
     if worst_quiet is not None and worst_quiet != worst:
         print(f"largest leave-one-out error, runs that did not share the machine: {100 * worst_quiet:.0f} %")
     return 0
+
+
+def _package() -> dict:
+    """The shipped table alone (what this machine's speed is measured against)."""
+    from orchestrator.clock import _as_throughputs, _package_table
+    return _as_throughputs(_package_table())
 
 
 if __name__ == "__main__":

@@ -66,7 +66,7 @@ from .resources import data_file
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "expected_steps", "step_plan",
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
-           "machine_id", "record_speed", "machine_factor", "speed_table_path"]
+           "machine_id", "record_speed", "machine_factor", "speed_table_path", "speed_ratio"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -205,20 +205,25 @@ def _speed_table() -> dict:
         return {}
 
 
-def record_speed(run_dir) -> float | None:
-    """Record the complete run ``run_dir``'s engine time over the package table's prediction for it
-    (its engine, scene, particles, steps run and ranks) under this machine; returns the ratio, or
-    None when the run does not tell (not complete, shared its cores, or no package entry)."""
-    smp = _sample(Path(run_dir))
+def speed_ratio(smp: RunSample) -> float | None:
+    """The run ``smp``'s engine time over the package table's prediction for it (its engine, scene,
+    particles, steps run and ranks); None when it does not tell (shared its cores, no package entry)."""
     if smp is None or smp.shared or smp.engine_s <= 0:
         return None
     tp = _as_throughputs(_package_table()).get(smp.engine, {}).get(smp.scene)
     if tp is None:
         return None
     predicted = tp.engine_time(smp.n_particles, smp.steps, smp.ranks)
-    if not predicted > 0:
+    return smp.engine_s / predicted if predicted > 0 else None
+
+
+def record_speed(run_dir) -> float | None:
+    """Record the complete run ``run_dir``'s :func:`speed_ratio` under this machine; returns it, or
+    None when the run does not tell (not complete, shared its cores, or no package entry)."""
+    smp = _sample(Path(run_dir))
+    ratio = speed_ratio(smp) if smp is not None else None
+    if ratio is None:
         return None
-    ratio = smp.engine_s / predicted
     table = _speed_table()
     rows = table.setdefault(machine_id(), {}).setdefault(smp.engine, [])
     rows[:] = [r for r in rows if r.get("run") != str(run_dir)] + [{"run": str(run_dir), "scene": smp.scene,
