@@ -201,3 +201,18 @@ def test_at_l0_the_ladder_names_the_tangential_history_where_the_engines_differ(
     assert "increment" in th.loc["yade", "mechanism"] and th.loc["liggghts", "note"].startswith("displacement")
     same = explain(CASES / "triaxial_small_quasistatic.yaml", "L0", runs[runs.engine != "yade"])
     assert not len(same) or "tangential history" not in set(same["term"])
+
+
+def test_an_engine_with_fewer_seeds_is_paired_on_the_shared_ones():
+    """LIGGGHTS on five packings, YADE on two of them: the difference is taken on those two only
+    (YADE's 0.362 and 0.342 against LIGGGHTS' 0.347 and 0.349 on the same packings, 27 Nov 2026), not
+    between the mean of five packings and the mean of two."""
+    runs = pd.DataFrame(_runs("L0", "liggghts", [0.347, 0.349, 0.368, 0.343, 0.347])
+                        + _runs("L0", "yade", [0.362, 0.342]))
+    row = compare_rungs(runs, ["L0"]).comparison.iloc[0]
+    assert row["scatter from"] == "paired, 2 seeds"
+    d = [0.347 - 0.362, 0.349 - 0.342]
+    scale = 0.5 * (0.348 + 0.352)
+    assert row["relative difference"] == pytest.approx(abs(sum(d) / 2) / scale, rel=1e-9)
+    assert row["scatter (2 sem, relative)"] == pytest.approx(2 * float(np.std(d, ddof=1)) / math.sqrt(2) / scale,
+                                                             rel=1e-9)

@@ -205,18 +205,21 @@ def _stats(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["rung", "engine", "observable", "mean", "std", "n"])
 
 
-def _paired(runs: pd.DataFrame, rung: str, a: str, b: str, obs: str) -> tuple[float, float, int] | None:
-    """(mean, standard deviation, n) of the seed-by-seed differences A_s − B_s of ``obs`` at ``rung``
-    when engines ``a`` and ``b`` both have it for the same two or more seeds; None otherwise."""
+def _paired(runs: pd.DataFrame, rung: str, a: str, b: str, obs: str) -> tuple[float, float, int, float] | None:
+    """(mean, standard deviation, n, mean of both engines) of the seed-by-seed differences A_s − B_s
+    of ``obs`` at ``rung`` over the seeds both engines ran (two or more; an engine that ran more
+    seeds than the other is compared on the shared ones only); None otherwise."""
     if "seed" not in runs or obs not in runs:
         return None
     ok = runs[(runs["status"] == "complete") & (runs["rung"] == rung)]
     va = ok[ok["engine"] == a].dropna(subset=[obs]).groupby("seed")[obs].mean()
     vb = ok[ok["engine"] == b].dropna(subset=[obs]).groupby("seed")[obs].mean()
-    if len(va) < 2 or set(va.index) != set(vb.index):
+    shared = sorted(set(va.index) & set(vb.index))
+    if len(shared) < 2:
         return None
-    d = (va - vb.loc[va.index]).to_numpy(float)
-    return float(d.mean()), float(d.std(ddof=1)), len(d)
+    va, vb = va.loc[shared], vb.loc[shared]
+    d = (va - vb).to_numpy(float)
+    return float(d.mean()), float(d.std(ddof=1)), len(d), float(0.5 * (abs(va.mean()) + abs(vb.mean())))
 
 
 def _floor(rung: str, top: str, obs: str) -> float | None:
@@ -259,7 +262,9 @@ def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
                     diff = absdiff / scale if scale > 0 else float("nan")
                     paired = _paired(runs, rung, a, b, obs)
                     if paired is not None:            # the same packings on both engines: seed by seed
-                        _, sd, n = paired
+                        dmean, sd, n, scale = paired
+                        absdiff = abs(dmean)
+                        diff = absdiff / scale if scale > 0 else float("nan")
                         scatter = float(2 * sd / math.sqrt(n) / scale) if scale > 0 else float("nan")
                         pairing = f"paired, {n} seeds"
                     else:
