@@ -53,7 +53,15 @@ def test_stages_frames_and_walls_as_on_liggghts(runs):
     assert np.minimum(frac, 1 - frac).max() < 1e-6
 
 
-def test_servo_holds_the_normal_stress_and_mu_agrees_with_liggghts(runs):
+def test_servo_holds_the_normal_stress_and_mu_agrees_with_liggghts(runs, tmp_path):
+    """The servo holds the normal stress, and the two engines, one law, give the same μ_macro within
+    the packings' scatter. On 100 grains μ_macro scatters by ±0.06 from packing to packing, several
+    times a run's own standard error (0.01-0.05), so one packing cannot test the engines' agreement:
+    the seed-12345 packing gave 0.387 ± 0.015 against 0.291 ± 0.017 in the suite (27 Nov 2026), i.e.
+    5.7 of its own standard errors apart, where four packings give differences of -0.04 to +0.18
+    around a mean of +0.03. So μ_macro is compared over four packings, seed by seed: the mean
+    difference within twice its standard error (the small shear cell's ladder does the same on five
+    packings of 1 025 grains, docs/crossval.md)."""
     case, out = runs
     res = {}
     for e in ("lammps", "liggghts"):
@@ -63,10 +71,18 @@ def test_servo_holds_the_normal_stress_and_mu_agrees_with_liggghts(runs):
     # deck +1.5 %, LIGGGHTS -6.5 % (realizations of the old deck perturbed by a resume: -3.6 % to +1.6 %,
     # docs/lammps.md, Plane shear)
     assert abs(res["lammps"]["normal_stress_rel_error"]) < 0.02
-    # two engines, one law: mu_macro within three standard errors (measured 0.310 +- 0.010 against
-    # 0.287 +- 0.017; the segmented deck 0.298 +- 0.007 against 0.273 +- 0.018)
-    sem = math.hypot(res["lammps"]["sem"], res["liggghts"]["sem"])
-    assert abs(res["lammps"]["mu"] - res["liggghts"]["mu"]) < 3 * sem, res
+    d = [res["lammps"]["mu"] - res["liggghts"]["mu"]]
+    for seed in (1, 2, 3):
+        mu = {}
+        for e in ("lammps", "liggghts"):
+            o = run_case(load_case(CASES / "plane_shear_smoke.yaml", overrides={"seed": seed}), e, runs_root=tmp_path,
+                         progress=False, analyze=False)
+            assert o.status == "complete", (e, seed)
+            mu[e] = steady_mu(Frames(o.run_dir / "frames.h5"), json.loads((o.run_dir / "params.json").read_text()))["mu"]
+        d.append(mu["lammps"] - mu["liggghts"])
+    d = np.array(d)
+    print(f"LAMMPS - LIGGGHTS mu_macro per packing: {np.round(d, 3)}")
+    assert abs(d.mean()) < 2 * d.std(ddof=1) / math.sqrt(len(d)), d
 
 
 def test_killed_run_resumes_exactly(runs, tmp_path):

@@ -103,7 +103,10 @@ def test_preparation_friction_then_contact_friction(runs, eng):
     sits exactly at the Coulomb limit |F_t| = μ|F_n| of the friction in force, on both engines
     (LIGGGHTS: tangential_model_history.h caps the spring force at μ|F_n|; YADE: Mindlin's Coulomb
     cap). Measured on the smoke case: at the end of stage 1, 4.1 % (LIGGGHTS, 15-21 % before the
-    drag's ramp) and 26 % (YADE) of them sit within 0.2 % of 0.1 and none at 0.5; at the end of
+    drag's ramp; 1.0 % on session 15's packing, 27 Nov 2026: 4 contacts) and 26 % (YADE) of them sit
+    within 0.2 % of 0.1 and none at 0.5. The check pools every stage-1 frame (the preparation) and
+    asks for many more contacts within 0.2 % of 0.1 than of 0.09 or 0.11, where a smooth distribution
+    puts about as many (five times); at the end of
     loading 5.7 % and 6.3 % sit at 0.5. A quantile of |F_t|/|F_n| is no such test on LIGGGHTS: its sticking
     contacts add the tangential dashpot to the capped spring (q90 0.100-0.111 at the end of stage
     1, with the realisation), so only the loading quantile is checked, against the contact value."""
@@ -115,17 +118,24 @@ def test_preparation_friction_then_contact_friction(runs, eng):
     with h5py.File(out.run_dir / "frames.h5") as f:
         stage = f["frames/stage"][:]
         ids = f["particles/id"][:]
-        for name, k in (("prep", int(np.flatnonzero(stage == 1)[-1])), ("load", len(stage) - 1)):
-            g = f["contacts"][str(k)]
-            gg = np.isin(g["i"][:], ids) & np.isin(g["j"][:], ids)
-            fn = np.linalg.norm(g["fn"][:][gg], axis=1)
-            ft = np.linalg.norm(g["ft"][:][gg], axis=1)
-            strong = fn > np.median(fn)
-            ratio = ft[strong] / fn[strong]
-            at[name] = {m: float(np.mean(np.abs(ratio / m - 1) < 2e-3)) for m in (mu_prep, mu)}
+        for name, frames in (("prep", np.flatnonzero(stage == 1)), ("load", [len(stage) - 1])):
+            ratio = []
+            for k in frames:        # every stage-1 frame: the preparation; the last frame: the loading
+                g = f["contacts"][str(int(k))]
+                gg = np.isin(g["i"][:], ids) & np.isin(g["j"][:], ids)
+                fn = np.linalg.norm(g["fn"][:][gg], axis=1)
+                ft = np.linalg.norm(g["ft"][:][gg], axis=1)
+                strong = fn > np.median(fn)
+                ratio.append(ft[strong] / fn[strong])
+            ratio = np.concatenate(ratio)
+            at[name] = {m: float(np.mean(np.abs(ratio / m - 1) < 2e-3))
+                        for m in (mu_prep, mu, 0.9 * mu_prep, 1.1 * mu_prep)}
             q90[name] = float(np.quantile(ratio, 0.9))
     print(f"{eng}: fraction of strong contacts at the Coulomb limit {at}; q90 {q90}")
-    assert at["prep"][mu_prep] >= 0.02 and at["prep"][mu] == 0.0, at
+    # during stage 1 the sliding contacts pile up at μ_prep: many more sit within 0.2 % of it than
+    # within 0.2 % of 0.9 or 1.1 μ_prep (a smooth distribution puts about as many at each)
+    controls = max(at["prep"][0.9 * mu_prep], at["prep"][1.1 * mu_prep])
+    assert at["prep"][mu_prep] >= 0.005 and at["prep"][mu_prep] >= 5 * controls and at["prep"][mu] == 0.0, at
     assert at["load"][mu] >= 0.02, at
     assert 0.6 * mu <= q90["load"] <= 1.1 * mu, q90
 
