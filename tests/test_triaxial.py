@@ -125,6 +125,8 @@ def test_preparation_friction_then_contact_friction(runs, eng):
                 gg = np.isin(g["i"][:], ids) & np.isin(g["j"][:], ids)
                 fn = np.linalg.norm(g["fn"][:][gg], axis=1)
                 ft = np.linalg.norm(g["ft"][:][gg], axis=1)
+                if not len(fn):         # the loose packing's first frame: no contact yet
+                    continue
                 strong = fn > np.median(fn)
                 ratio.append(ft[strong] / fn[strong])
             ratio = np.concatenate(ratio)
