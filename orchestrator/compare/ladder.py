@@ -390,7 +390,8 @@ def tangential_dashpot_rows(case_path, engines) -> list[dict]:
 
 def plot_ladder(res: LadderResult):
     """Relative engine difference per rung and observable, one panel per engine pair (three
-    engines: three panels on one y scale), with the scatter band and the 5 % and 10 % floors."""
+    engines: three panels on one y scale), each with its scatter (2 sem) as a band from 0 and as an
+    error bar, and the 5 % and 10 % floors."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -403,12 +404,15 @@ def plot_ladder(res: LadderResult):
     colors = {}
     for ax, pair in zip(axes[0], pairs):
         sel = comp[comp["engines"] == pair] if len(comp) else comp
-        for obs, g in sel.groupby("observable", sort=False):
-            xs = [x[r] for r in g["rung"]]
+        for j, (obs, g) in enumerate(sel.groupby("observable", sort=False)):
+            xs = [x[r] + 0.04 * (j - 2) for r in g["rung"]]       # side by side within a rung
             line, = ax.plot(xs, 100 * g["relative difference"], "o-", color=colors.get(obs), label=obs)
             colors.setdefault(obs, line.get_color())
-            ax.fill_between(xs, 0, 100 * g["scatter (2 sem, relative)"].astype(float).fillna(0), alpha=0.08,
-                            color=colors[obs])
+            scatter = 100 * g["scatter (2 sem, relative)"].astype(float).fillna(0)
+            ax.fill_between(xs, 0, scatter, alpha=0.08, color=colors[obs])
+            # the difference ± its scatter: a bar that reaches 0 is not significant
+            ax.errorbar(xs, 100 * g["relative difference"], yerr=scatter, fmt="none", ecolor=colors[obs],
+                        alpha=0.6, capsize=3, lw=1)
         ax.set_xticks(range(len(rungs)), rungs)
         if len(rungs) == 1:
             ax.set_xlim(-0.5, 0.5)
