@@ -11,8 +11,9 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
 - ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
   predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind);
 - ``machine``: the package table times this machine's speed as the *other* quiet runs of the same
-  engine given here measure it (the median of their :func:`orchestrator.clock.speed_ratio`: what
-  ``run --dry-run`` prints once the machine has recorded them; "n/a" without such a run).
+  engine given here measure it (the median of their :func:`orchestrator.clock.speed_ratio`, those
+  of the same scene where there are any: what ``run --dry-run`` prints once the machine has
+  recorded them; "n/a" without such a run).
 
 ``load`` is the machine's mean load average over the run's cores (``orchestrator.attempts``; "-"
 for runs recorded before it was kept). A multi-rank run with a load above its cores by more than
@@ -68,8 +69,10 @@ def main(argv=None) -> int:
         loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
-        ratios = [r for o in samples if o.engine == s.engine and o.source != s.source
-                  for r in [speed_ratio(o)] if r is not None]
+        engine_runs = [o for o in samples if o.engine == s.engine and o.source != s.source]
+        same = [o for o in engine_runs if o.scene == s.scene]     # as machine_factor: the scene's own first
+        ratios = [r for o in (same or engine_runs) for r in [speed_ratio(o)] if r is not None]
+        ratios = ratios or [r for o in engine_runs for r in [speed_ratio(o)] if r is not None]
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
         r3 = float(np.median(ratios)) * pk / s.engine_s if ratios and pk == pk else math.nan
         if r2 == r2:

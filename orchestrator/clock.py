@@ -235,11 +235,15 @@ def record_speed(run_dir) -> float | None:
     return ratio
 
 
-def machine_factor(engine: str) -> tuple[float, int] | None:
+def machine_factor(engine: str, scene: str | None = None) -> tuple[float, int] | None:
     """(median ratio of engine time to the package table's prediction, runs) of ``engine`` on this
-    machine (:func:`record_speed`); None before a run has been recorded."""
-    rows = _speed_table().get(machine_id(), {}).get(engine) or []
-    ratios = [float(r["ratio"]) for r in rows if isinstance(r.get("ratio"), (int, float)) and r["ratio"] > 0]
+    machine (:func:`record_speed`): of its runs of ``scene`` where there are any (the ratio differs
+    by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42), else of all its runs;
+    None before a run has been recorded."""
+    rows = [r for r in _speed_table().get(machine_id(), {}).get(engine) or []
+            if isinstance(r.get("ratio"), (int, float)) and r["ratio"] > 0]
+    same = [r for r in rows if scene is not None and r.get("scene") == scene]
+    ratios = [float(r["ratio"]) for r in (same or rows)]
     return (float(np.median(ratios)), len(ratios)) if ratios else None
 
 
@@ -255,7 +259,7 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         machine_speed = table is None
     table = load_table() if table is None else table
     if machine_speed:
-        mf = machine_factor(engine)
+        mf = machine_factor(engine, scene)
         if mf is not None and scene not in _user_table().get(engine, {}):
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
     scenes = table.get(engine, {})
