@@ -58,6 +58,7 @@ def main(argv=None) -> int:
     print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'w':>2s} {'actual s':>9s} "
           f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'machine':>7s} {'load':>9s}  run")
     package = _package()
+    ratio_of = {s.source: speed_ratio(s, package) for s in samples}     # each run's speed, read once
     worst = worst_quiet = None
     for s in samples:
         # what `run --dry-run` printed before the run: the step budget, or where the scene decides its
@@ -69,10 +70,10 @@ def main(argv=None) -> int:
         loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
-        engine_runs = [o for o in samples if o.engine == s.engine and o.source != s.source]
-        same = [o for o in engine_runs if o.scene == s.scene]     # as machine_factor: the scene's own first
-        ratios = [r for o in (same or engine_runs) for r in [speed_ratio(o)] if r is not None]
-        ratios = ratios or [r for o in engine_runs for r in [speed_ratio(o)] if r is not None]
+        known = [o for o in samples if o.engine == s.engine and o.source != s.source
+                 and ratio_of[o.source] is not None]
+        same = [o for o in known if o.scene == s.scene]           # as machine_factor: the scene's own first
+        ratios = [ratio_of[o.source] for o in (same or known)]
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
         r3 = float(np.median(ratios)) * pk / s.engine_s if ratios and pk == pk else math.nan
         if r2 == r2:

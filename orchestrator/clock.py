@@ -164,11 +164,11 @@ def _as_throughputs(table: dict) -> dict:
             for eng, scenes in table.items() if not eng.startswith("_")}
 
 
-def load_table() -> dict:
+def load_table(user: dict | None = None) -> dict:
     """``{engine: {scene: Throughput}}``: the package table, overridden entry by entry by the
-    user table."""
+    user table (``user``: that table as read already, default: read it)."""
     table = _package_table()
-    for eng, scenes in _user_table().items():
+    for eng, scenes in (_user_table() if user is None else user).items():
         table.setdefault(eng, {}).update(scenes)
     return _as_throughputs(table)
 
@@ -205,12 +205,14 @@ def _speed_table() -> dict:
         return {}
 
 
-def speed_ratio(smp: RunSample) -> float | None:
+def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:
     """The run ``smp``'s engine time over the package table's prediction for it (its engine, scene,
-    particles, steps run and ranks); None when it does not tell (shared its cores, no package entry)."""
+    particles, steps run and ranks); None when it does not tell (shared its cores, no package entry).
+    ``package``: the package table as :class:`Throughput` entries, if already read."""
     if smp is None or smp.shared or smp.engine_s <= 0:
         return None
-    tp = _as_throughputs(_package_table()).get(smp.engine, {}).get(smp.scene)
+    package = _as_throughputs(_package_table()) if package is None else package
+    tp = package.get(smp.engine, {}).get(smp.scene)
     if tp is None:
         return None
     predicted = tp.engine_time(smp.n_particles, smp.steps, smp.ranks)
@@ -257,10 +259,11 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     scale, note = 1.0, ""
     if machine_speed is None:
         machine_speed = table is None
-    table = load_table() if table is None else table
+    user = _user_table()
+    table = load_table(user) if table is None else table
     if machine_speed:
         mf = machine_factor(engine, scene)
-        if mf is not None and scene not in _user_table().get(engine, {}):
+        if mf is not None and scene not in user.get(engine, {}):
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
     scenes = table.get(engine, {})
     if scene in scenes:

@@ -146,10 +146,10 @@ print("RESULT " + json.dumps({"before": before, "after": after, "new_mu": new_mu
 def test_yade_walls_frictional_gives_coulomb_sliding(tmp_path):
     R, E, G, V0, T = 15e-6, 5e6, 100.0, 0.1, 2e-4
     p = {"material": {"E": E, "nu": 0.3, "rho": 2500.0}, "friction": MU, "wall": {"nu": 0.3},
+         "tangential_damping": True,
          "scene": {"contact": {"restitution": {"target": 0.5, "from": "test"}}, "wall_adhesion": False,
                    "wall_mu": MU, "wall_friction_from": 1}}
-    engine = {"contact_restitution_input": 0.5, "wall_young": E, "gamma": None, "eta": None, "ktwist": None,
-              "tangential_damping": True}
+    engine = {"contact_restitution_input": 0.5, "wall_young": E, "gamma": None, "eta": None, "ktwist": None}
     text = environment().from_string(YADE_SLIDE).render(R=R, G=G, V0=V0, T=T, MU=MU, p=p, engine=engine)
     script = tmp_path / "slide.py"
     script.write_text(text)

@@ -57,7 +57,6 @@ class YadeNumbers(Frozen):
     """The YADE templates' own numbers (``engine`` in the templates)."""
     restitution_input: float                      #: Mindlin ``en`` = ``es`` [-]
     contact_restitution_input: float | None = opt("``en`` for the scene's own contact restitution [-]")
-    tangential_damping: bool = True               #: Mindlin ``es`` = ``en`` (else ``es`` = 1: betas = 0)
     wall_young: float | None = opt("facet walls' Young's modulus [Pa] (shear cell)")
     gamma: float | None = opt("DMT surface energy γ [J/m²]")
     eta: float | None = opt("rolling limit η: M_max = η R̄ |F_n| [-]")
@@ -101,8 +100,7 @@ def yade_numbers(case, params: Params) -> YadeNumbers:
         out["plane_sphere_radius"] = Rb
     elif kind == "triaxial" and sc.radius0 is not None:
         out["platen_radius"] = PLATEN_SPHERE_FACTOR * sc.radius0
-    return YadeNumbers(restitution_input=params.restitution.target, tangential_damping=params.tangential_damping,
-                       **out)
+    return YadeNumbers(restitution_input=params.restitution.target, **out)
 
 
 def seed_term_ratios(case, params: Params, xs) -> list:
