@@ -38,7 +38,7 @@ The table lives in package data (``benchmarks/throughput.json``, shipped through
 ``$XDG_DATA_HOME/orchestrator/throughput.json`` takes precedence.
 
 **This machine's speed.** The package table was measured on one machine; another runs the same
-decks faster or slower (a newer 2-core machine ran the small shear cell on LIGGGHTS in 0.48 of the
+decks faster or slower (a newer 2-core machine ran the small shear cell on LIGGGHTS in 0.44 of the
 table's time). Every complete run that did not share its cores records its engine time over the
 package table's prediction for it, per engine, under this machine's CPU
 (:func:`record_speed`, ``machine_speed.json`` beside the user table); estimates from the package
