@@ -110,6 +110,8 @@ class Scene(ABC):
         none), in :attr:`series_file`.
     wall_columns : columns of the wall sampler's rows (:meth:`EngineOutput.wall_rows`).
     observables : convergence observables (orchestrator.stability.observables) for this scene.
+    count_field : the ``scene:`` field the convergence knob ``count`` sets (the grain count; None:
+        the scene has none).
     default_analyses : analysis specs a report runs when the case lists none.
     """
 
@@ -121,6 +123,7 @@ class Scene(ABC):
     series_columns: ClassVar[tuple[str, ...]] = ()
     wall_columns: ClassVar[tuple[str, ...]] = ()
     observables: ClassVar[tuple[str, ...]] = ()
+    count_field: ClassVar[str | None] = "n_particles"
     default_analyses: ClassVar[tuple[str, ...]] = ()
 
     # -- validation ------------------------------------------------------------------------
@@ -133,6 +136,14 @@ class Scene(ABC):
                            f"engine's deck, so the run would silently lack it; remove it from the case "
                            f"(scenes that realise it: {', '.join(_scenes_honouring(term)) or 'none'})")
         return out
+
+    def size_overrides(self, section, scale: float) -> dict:
+        """The ``scene:`` overrides that scale the system's size by ``scale`` [-] at fixed grains
+        (the convergence knob ``size_scale``): the lengths a finite-size error goes with, the
+        grains and the protocol kept. ``section`` is the case's ``scene:`` model. The default: the
+        scene has no size knob (a :class:`ValueError` naming the scene)."""
+        raise ValueError(f"the {self.kind} scene has no size_scale knob; ladder one of its size fields "
+                         f"instead (--knob scene.FIELD)")
 
     # -- physics ---------------------------------------------------------------------------
     @abstractmethod

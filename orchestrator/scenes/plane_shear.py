@@ -381,6 +381,11 @@ class PlaneShearScene(base.Scene):
     wall_columns = ("step", "z_top", "fx_top", "fy_top", "fz_top", "fx_bottom", "fy_bottom", "fz_bottom")
     observables = ("mu_macro",)
 
+    def size_overrides(self, section, scale):
+        """The periodic box side × ``scale`` at the same sample height (grains × scale²)."""
+        return {"width": section.width * float(scale),
+                "n_particles": max(10, round(section.n_particles * float(scale) ** 2))}
+
     required_features = staticmethod(required_features)
     derive = staticmethod(derive)
     max_velocity = staticmethod(max_velocity)

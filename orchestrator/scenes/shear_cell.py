@@ -597,6 +597,14 @@ class ShearCellScene(base.Scene):
     wall_columns = ("step", "z_lower", "fx_lower", "fy_lower", "fz_lower", "tz_lower", "tz_upper", "tz_cylinder")
     observables = ("torque", "angle")
 
+    def size_overrides(self, section, scale):
+        """The cell's diameter × ``scale`` at the same fill height, vanes and gap (the grain count
+        grows as scale²; an explicit ``n_particles`` with it)."""
+        out = {"cell_diameter": f"{section.cell_diameter * float(scale)!r} m"}
+        if section.n_particles is not None:
+            out["n_particles"] = max(2, round(section.n_particles * float(scale) ** 2))
+        return out
+
     required_features = staticmethod(required_features)
     derive = staticmethod(derive)
     max_velocity = staticmethod(max_velocity)

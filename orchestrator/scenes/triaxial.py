@@ -1121,6 +1121,15 @@ class TriaxialScene(base.Scene):
     series_file = "triax.txt"
     series_columns = SERIES_COLUMNS
     observables = ("peak_stress_ratio", "sigma3_error")
+    count_field = "grains"
+
+    def size_overrides(self, section, scale):
+        """The sample's diameter and height × ``scale`` (the aspect kept): ``grains`` × scale³
+        where the case sets it, else the two lengths."""
+        s = float(scale)
+        if section.grains is not None:
+            return {"grains": max(20, round(section.grains * s ** 3))}
+        return {"diameter": f"{section.diameter * s!r} m", "height": f"{section.height * s!r} m"}
 
     required_features = staticmethod(required_features)
     derive = staticmethod(derive)

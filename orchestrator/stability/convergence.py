@@ -11,8 +11,11 @@ no other run beats in both), and the cheapest setting whose error is below ``tar
 
 Knobs (``--knob``): ``dt_fraction`` (timestep.fraction), ``stiffness_scale`` (Young's modulus ×,
 walls too when they are a material), ``rate_scale`` (the scene's inertial/quasi-static numbers ×),
-``particle_scale`` (PSD diameters ×, keeping the count), ``count`` (scene.n_particles), or any
-dotted case field (``scene.width``).
+``particle_scale`` (PSD diameters ×, keeping the count), ``count`` (the scene's grain count:
+``scene.n_particles``, the triaxial's ``scene.grains``), ``size_scale`` (the system's size ×
+at the same grains, as the scene defines it: the shear cell's diameter, the triaxial sample's
+diameter and height, the plane-shear box side; :meth:`orchestrator.scenes.base.Scene.size_overrides`),
+or any dotted case field (``scene.width``).
 """
 from __future__ import annotations
 
@@ -22,13 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from ..case import CaseError, load_case
+from ..registry import get_scene
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
 from .sweep import _finished, nested
 from ..analysis._common import save_figure
 
-KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count")
+KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count", "size_scale")
 _RATE_FIELDS = ("inertial_number", "compression_inertial_number", "quasi_static_number")
 
 
@@ -48,8 +52,16 @@ def knob_overrides(case_path, knob: str, value) -> dict:
     if knob == "particle_scale":
         p = base.scene.psd
         return {"scene": {"psd": {k: f"{getattr(p, k) * float(value)!r} m" for k in ("median", "d_min", "d_max")}}}
-    if knob == "count":
-        return {"scene": {"n_particles": int(value)}}
+    if knob in ("count", "size_scale"):
+        scene = get_scene(base.scene.kind)
+        if knob == "size_scale":
+            try:
+                return {"scene": scene.size_overrides(base.scene, float(value))}
+            except ValueError as exc:
+                raise CaseError(f"{case_path}: --knob size_scale: {exc}") from None
+        if scene.count_field is None:
+            raise CaseError(f"{case_path}: --knob count: the {base.scene.kind} scene has no grain count")
+        return {"scene": {scene.count_field: int(value)}}
     return nested({knob: value})
 
 

@@ -13,6 +13,7 @@ knob               h(value)                        why (leading-order error ∝ 
 ``stiffness_scale``  value^(-2/3)                  Hertz overlap at a fixed load, δ/d ∝ (p/E*)^(2/3)
                                                    (Johnson 1985 §4.2): the softness effects scale so
 ``count``          value^(-1/3)                    the boundary layer's share of the sample, d/L ∝ N^(-1/3)
+``size_scale``     value^(-1)                      the same share, d/L ∝ 1/size
 other              value                           generic
 =================  ==============================  ==================================================
 
@@ -37,7 +38,8 @@ from scipy.stats import t as student_t
 __all__ = ["fidelity_distance", "knob_value", "extrapolate", "power_law_time"]
 
 #: h = value ** exponent for the knobs with a physical scaling (module docstring)
-_EXPONENT = {"dt_fraction": 1.0, "rate_scale": 1.0, "stiffness_scale": -2.0 / 3.0, "count": -1.0 / 3.0}
+_EXPONENT = {"dt_fraction": 1.0, "rate_scale": 1.0, "stiffness_scale": -2.0 / 3.0, "count": -1.0 / 3.0,
+             "size_scale": -1.0}
 
 
 def fidelity_distance(knob: str, value) -> np.ndarray:

@@ -116,3 +116,31 @@ def test_refused_rung_is_a_row(runs_root):
     # dt_fraction 1.0 is above the coordination limit's safe fraction for this case: refused, not run
     out = ladder(CASE, "dt_fraction", [1.0], engines=["liggghts"], runs_root=runs_root, reference=1.0)
     assert out["table"].loc[0, "status"] == "refused"
+
+
+def test_size_and_count_knobs_scale_each_scene_as_it_defines_its_size():
+    # issue #15 item 4: the system-size ladders; no engine, only the derived scene
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    from orchestrator.stability.convergence import knob_overrides
+
+    cases = Path(__file__).resolve().parents[2] / "cases"
+
+    def derived(name, knob, value):
+        c = load_case(cases / name, overrides=knob_overrides(cases / name, knob, value))
+        return c, derive(c)["scene"]
+
+    # shear cell: the diameter doubles at the same fill height, so the grain count grows ~4x
+    c1, s1 = derived("shear_cell_small.yaml", "size_scale", 1)
+    c2, s2 = derived("shear_cell_small.yaml", "size_scale", 2)
+    assert c2.scene.cell_diameter == pytest.approx(2 * c1.scene.cell_diameter)
+    assert c2.scene.fill_height == c1.scene.fill_height and c2.scene.gap == c1.scene.gap
+    assert 3.5 < s2["n"] / s1["n"] < 4.5
+    # triaxial: grains x scale^3; count sets the same field
+    t, _ = derived("triaxial_small.yaml", "size_scale", 0.5)
+    assert t.scene.grains == 250
+    t, _ = derived("triaxial_small.yaml", "count", 1000)
+    assert t.scene.grains == 1000
+    # h = 1/size: the ideal limit is the infinite system
+    assert fidelity_distance("size_scale", [2.0])[0] == pytest.approx(0.5)
+    assert knob_value("size_scale", 0.25) == pytest.approx(4.0)
