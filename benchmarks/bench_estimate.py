@@ -11,9 +11,9 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
 - ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
   predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind);
 - ``machine``: the package table times this machine's speed as the *other* quiet runs of the same
-  engine given here measure it (the median of their :func:`orchestrator.clock.speed_ratio`, those
-  of the same scene where there are any: what ``run --dry-run`` prints once the machine has
-  recorded them; "n/a" without such a run).
+  engine given here measure it (their :func:`orchestrator.clock.speed_ratio`, those of the same
+  scene where there are any, at this run's size by :func:`orchestrator.clock.speed_at_size`: what
+  ``run --dry-run`` prints once the machine has recorded them; "n/a" without such a run).
 
 ``load`` is the machine's mean load average over the run's cores (``orchestrator.attempts``; "-"
 for runs recorded before it was kept). A multi-rank run with a load above its cores by more than
@@ -30,9 +30,9 @@ import math
 from pathlib import Path
 
 from orchestrator.case import load_case
-import numpy as np
 
-from orchestrator.clock import estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_ratio
+from orchestrator.clock import (estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_at_size,
+                                speed_ratio)
 from orchestrator.runner import run_case
 
 HERE = Path(__file__).resolve().parent
@@ -73,9 +73,11 @@ def main(argv=None) -> int:
         known = [o for o in samples if o.engine == s.engine and o.source != s.source
                  and ratio_of[o.source] is not None]
         same = [o for o in known if o.scene == s.scene]           # as machine_factor: the scene's own first
-        ratios = [ratio_of[o.source] for o in (same or known)]
+        use = same or known
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
-        r3 = float(np.median(ratios)) * pk / s.engine_s if ratios and pk == pk else math.nan
+        factor = (speed_at_size([o.n_particles for o in use], [ratio_of[o.source] for o in use],
+                                s.n_particles if same else None) if use else math.nan)
+        r3 = factor * pk / s.engine_s if use and pk == pk else math.nan
         if r2 == r2:
             worst = max(worst or 0.0, abs(r2 - 1))
             if not s.shared:

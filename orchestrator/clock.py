@@ -42,8 +42,8 @@ decks faster or slower (a newer 2-core machine ran the small shear cell on LIGGG
 table's time). Every complete run that did not share its cores records its engine time over the
 package table's prediction for it, per engine, under this machine's CPU
 (:func:`record_speed`, ``machine_speed.json`` beside the user table); estimates from the package
-table are multiplied by the median of the last :data:`SPEED_KEEP` (:func:`machine_factor`), and say
-so. Entries of a user table (refitted on this machine) are taken as they are.
+table are multiplied by their median, interpolated in the particle count between the sizes
+recorded (:func:`machine_factor`, :func:`speed_at_size`), and say so. Entries of a user table (refitted on this machine) are taken as they are.
 ``orchestrator clock refresh RUNS…`` refits it from the ``summary.json`` of complete runs (in a
 checkout, ``--package`` writes the shipped table itself).
 """
@@ -66,7 +66,7 @@ from .resources import data_file
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "expected_steps", "step_plan",
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
-           "machine_id", "record_speed", "machine_factor", "speed_table_path", "speed_ratio"]
+           "machine_id", "record_speed", "machine_factor", "speed_at_size", "speed_table_path", "speed_ratio"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -173,8 +173,8 @@ def load_table(user: dict | None = None) -> dict:
     return _as_throughputs(table)
 
 
-#: runs per engine whose speed ratio :func:`machine_factor` keeps (the most recent)
-SPEED_KEEP = 25
+#: runs per engine, scene and size whose speed ratio :func:`machine_factor` keeps (the most recent)
+SPEED_KEEP = 12
 
 
 def machine_id() -> str:
@@ -220,8 +220,10 @@ def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:
 
 
 def record_speed(run_dir) -> float | None:
-    """Record the complete run ``run_dir``'s :func:`speed_ratio` under this machine; returns it, or
-    None when the run does not tell (not complete, shared its cores, or no package entry)."""
+    """Record the complete run ``run_dir``'s :func:`speed_ratio` under this machine, with its scene
+    and particle count; returns it, or None when the run does not tell (not complete, shared its
+    cores, or no package entry). The last :data:`SPEED_KEEP` runs of each engine, scene and size
+    (:func:`_size_groups`) are kept."""
     smp = _sample(Path(run_dir))
     ratio = speed_ratio(smp) if smp is not None else None
     if ratio is None:
@@ -229,24 +231,67 @@ def record_speed(run_dir) -> float | None:
     table = _speed_table()
     rows = table.setdefault(machine_id(), {}).setdefault(smp.engine, [])
     rows[:] = [r for r in rows if r.get("run") != str(run_dir)] + [{"run": str(run_dir), "scene": smp.scene,
+                                                                      "n": int(smp.n_particles),
                                                                       "ratio": round(ratio, 4)}]
-    del rows[:-SPEED_KEEP]
+    rows[:] = _keep_recent(rows)
     out = speed_table_path()
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text(out, json.dumps(table, indent=1, sort_keys=True) + "\n")
     return ratio
 
 
-def machine_factor(engine: str, scene: str | None = None) -> tuple[float, int] | None:
-    """(median ratio of engine time to the package table's prediction, runs) of ``engine`` on this
-    machine (:func:`record_speed`): of its runs of ``scene`` where there are any (the ratio differs
-    by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42), else of all its runs;
+def _keep_recent(rows: list) -> list:
+    """The last :data:`SPEED_KEEP` rows of each scene and size group (rows without a count: one
+    group per scene), in their order."""
+    ns = np.array([float(r.get("n") or 0) for r in rows])
+    sized = ns > 0
+    group = np.full(len(rows), -1)
+    if sized.any():
+        group[sized] = _size_groups(ns[sized])
+    seen: dict = {}
+    keep = [False] * len(rows)
+    for i in range(len(rows) - 1, -1, -1):
+        key = (rows[i].get("scene"), int(group[i]))
+        seen[key] = seen.get(key, 0) + 1
+        keep[i] = seen[key] <= SPEED_KEEP
+    return [r for r, k in zip(rows, keep) if k]
+
+
+def speed_at_size(ns, ratios, n: int | None) -> float:
+    """This machine's speed ratio [-] for a run of ``n`` particles, from recorded runs of ``ns``
+    particles and their ``ratios`` (one engine and scene): the median ratio of each size group
+    (:func:`_size_groups`), interpolated linearly in log n between the groups and held constant
+    beyond the smallest and largest (never extrapolated). A machine's speed-up over the table's
+    differs with the size (a newer machine ran LIGGGHTS' 228-grain smoke shear cell in 0.26-0.33
+    of the table's time and its 1 025-grain small cell in 0.44, 27 Nov 2026), so one median
+    carried across sizes missed by up to 2.2x (docs/validation.md). Without counts or with one
+    size: the median of all."""
+    r = np.asarray(ratios, float)
+    x = np.asarray([float(v) if v else 0.0 for v in ns], float)
+    ok = x > 0
+    if n is None or ok.sum() == 0:
+        return float(np.median(r))
+    x, r = x[ok], r[ok]
+    group = _size_groups(x)
+    gn = np.array([np.exp(np.median(np.log(x[group == g]))) for g in range(group.max() + 1)])
+    gr = np.array([np.median(r[group == g]) for g in range(group.max() + 1)])
+    order = np.argsort(gn)
+    return float(np.exp(np.interp(np.log(max(n, 1)), np.log(gn[order]), np.log(gr[order]))))
+
+
+def machine_factor(engine: str, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
+    """(ratio of engine time to the package table's prediction, runs it rests on) of ``engine`` on
+    this machine (:func:`record_speed`): from its runs of ``scene`` where there are any (the ratio
+    differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42), else from
+    all its runs; at ``n_particles`` (:func:`speed_at_size`) where the runs recorded their counts.
     None before a run has been recorded."""
     rows = [r for r in _speed_table().get(machine_id(), {}).get(engine) or []
             if isinstance(r.get("ratio"), (int, float)) and r["ratio"] > 0]
     same = [r for r in rows if scene is not None and r.get("scene") == scene]
-    ratios = [float(r["ratio"]) for r in (same or rows)]
-    return (float(np.median(ratios)), len(ratios)) if ratios else None
+    use = same or rows
+    if not use:
+        return None
+    return speed_at_size([r.get("n") for r in use], [r["ratio"] for r in use], n_particles if same else None), len(use)
 
 
 def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, ranks: int = 1,
@@ -262,7 +307,7 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     user = _user_table()
     table = load_table(user) if table is None else table
     if machine_speed:
-        mf = machine_factor(engine, scene)
+        mf = machine_factor(engine, scene, n_particles)
         if mf is not None and scene not in user.get(engine, {}):
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
     scenes = table.get(engine, {})

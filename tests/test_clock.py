@@ -252,3 +252,24 @@ def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypa
         "startup_s": 1.0, "per_step_s": 0.0, "per_particle_step_s": 1e-7}}}))
     t_user, basis = estimate_engine_time("liggghts", "shear_cell", n, steps)
     assert t_user == pytest.approx(1.0 + steps * 1e-7 * n) and "machine" not in basis
+
+
+def test_this_machines_speed_is_interpolated_in_size_not_carried_across_sizes(tmp_path, monkeypatch):
+    """The newer machine of 27 Nov 2026 ran LIGGGHTS' smoke shear cell (228 grains) at ~0.3 of the
+    table's time and the small one (1 025) at 0.44: one median carried across sizes missed the smoke
+    case by up to 2.2x. The factor is each size's median, interpolated in log n, held beyond the ends."""
+    from orchestrator.clock import machine_factor, machine_id, speed_at_size
+    ns, ratios = [228, 230, 1025, 1025, 1025], [0.29, 0.31, 0.44, 0.45, 0.43]
+    assert speed_at_size(ns, ratios, 229) == pytest.approx(0.30, rel=1e-4)
+    assert speed_at_size(ns, ratios, 1025) == pytest.approx(0.44)
+    mid = float(np.sqrt(228.99 * 1025))
+    assert speed_at_size(ns, ratios, mid) == pytest.approx(np.sqrt(0.30 * 0.44), rel=2e-3)
+    assert speed_at_size(ns, ratios, 14_107) == pytest.approx(0.44)      # never extrapolated
+    assert speed_at_size(ns, ratios, 50) == pytest.approx(0.30)
+    assert speed_at_size([None, None], [0.3, 0.5], 1000) == pytest.approx(0.4)   # rows without counts: median
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    (tmp_path / "speed.json").write_text(json.dumps({machine_id(): {"liggghts": [
+        {"run": f"r{k}", "scene": "shear_cell", "n": n, "ratio": r} for k, (n, r) in enumerate(zip(ns, ratios))]}}))
+    assert machine_factor("liggghts", "shear_cell", 228) == (pytest.approx(0.30), 5)
+    assert machine_factor("liggghts", "shear_cell") == (pytest.approx(0.43), 5)
+    assert machine_factor("liggghts", "triaxial", 228) == (pytest.approx(0.43), 5)   # another scene: the median
