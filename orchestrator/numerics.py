@@ -1,6 +1,8 @@
 """Small numerical helpers shared by scenes and analyses (no heavy imports: scenes use them)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -43,6 +45,24 @@ def block_sem(x: np.ndarray, blocks: int = 8) -> float:
         return float("nan")
     bm = np.array([b.mean() for b in np.array_split(x, nb)])
     return float(bm.std(ddof=1) / np.sqrt(nb))
+
+
+def block_drift(x: np.ndarray, blocks: int = 8) -> tuple[float, float]:
+    """(drift, its standard error) of a correlated series across its length, unit that of ``x``:
+    a straight line fitted to ``blocks`` contiguous block means (as :func:`block_sem`), its change
+    from the first block's centre to the last's, with the slope's standard error from the block
+    means' scatter about the line (ordinary least squares). A steady series drifts by less than
+    about two standard errors. NaN with fewer than three blocks."""
+    x = np.asarray(x, float)
+    nb = min(int(blocks), x.size)
+    if nb < 3:
+        return float("nan"), float("nan")
+    bm = np.array([b.mean() for b in np.array_split(x, nb)])
+    k = np.arange(nb, dtype=float)
+    slope, icpt = np.polyfit(k, bm, 1)
+    resid = bm - (icpt + slope * k)
+    se = math.sqrt(float(resid @ resid) / (nb - 2) / float(((k - k.mean()) ** 2).sum()))
+    return float(slope * (nb - 1)), float(se * (nb - 1))
 
 
 def multiple_of(n: int, k: int) -> int:

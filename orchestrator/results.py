@@ -109,6 +109,13 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
         n = s.get("n", 0)
         rows.append(KeyResult("μ_macro (steady)", s.get("mu_mean", np.nan), "", s.get("mu_std"),
                               f"std over {n} samples of the steady window", "not quoted (particle μ = 0.58, §3.2)"))
+        if s.get("mu_sem") is not None:
+            rows.append(KeyResult("μ_macro: standard error of the mean", s.get("mu_sem"), "", None,
+                                  "from 8 block means (the samples are correlated)"))
+        if s.get("mu_drift") is not None and s.get("mu_steady") is not None:
+            rows.append(KeyResult("μ_macro: drift across the steady window (steady: |drift| ≤ 2 se)",
+                                  s["mu_drift"], "", s.get("mu_drift_se"),
+                                  "standard error of a line through 8 block means", ok=bool(s["mu_steady"])))
     lab = _label(asum, "shearband")
     sc = params.get("scene") or {}
     x50 = sc.get("x50") or (sc.get("psd") or {}).get("median") or _x50(case)

@@ -88,3 +88,27 @@ def test_analysis_names_known_without_the_analysis_stack_match_the_registry():
     from orchestrator.analysis import ANALYSES
     from orchestrator.analysis_specs import ANALYSIS_NAMES
     assert sorted(ANALYSIS_NAMES) == sorted(ANALYSES)
+
+
+def test_block_drift_finds_a_trend_and_its_error_covers_a_steady_series():
+    """orchestrator.numerics.block_drift (issue #15 item 1: 'μ_macro is steady'): a line through 8
+    block means; a steady noisy series drifts within 2 se in ~95 % of draws, a climbing one does not."""
+    from orchestrator.numerics import block_drift
+    rng = np.random.default_rng(3)
+    steady = [abs(d) <= 2 * se for d, se in (block_drift(rng.normal(0.6, 0.1, 800)) for _ in range(400))]
+    assert 0.85 <= np.mean(steady) <= 0.99
+    d, se = block_drift(np.linspace(0.55, 0.68, 800) + rng.normal(0, 0.02, 800))
+    assert d == pytest.approx(0.13 * 7 / 8, rel=0.1) and abs(d) > 2 * se    # centre of block 1 to block 8
+    assert all(np.isnan(block_drift([1.0, 2.0])))
+
+
+def test_shear_cell_results_say_whether_mu_macro_is_steady(tmp_path):
+    run = _fake_shear_cell_run(tmp_path)
+    p = run / "analysis" / "analysis_summary.json"
+    asum = json.loads(p.read_text())
+    asum["friction"]["scalars"].update({"mu_sem": 0.02, "mu_drift": 0.093, "mu_drift_se": 0.033, "mu_steady": False})
+    p.write_text(json.dumps(asum))
+    rows = {r.quantity: r for r in key_results(run)}
+    drift = next(r for q, r in rows.items() if q.startswith("μ_macro: drift"))
+    assert drift.ok is False and drift.text() == "0.093 ± 0.033"
+    assert rows["μ_macro: standard error of the mean"].value == 0.02

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..numerics import block_sem
+from ..numerics import block_drift, block_sem
 from ._common import Result
 from .plots import plot_friction
 
@@ -59,7 +59,10 @@ def analyze_friction(frames, radius: float | None = None, torque_wall: str | Non
 
     Tables: ``friction`` (time, angle if known, torque [N m], normal_force [N], mu).
     Scalars: ``mu_mean``, ``mu_std`` (of the samples), ``mu_sem`` (standard error of the mean from 8
-    block means: the samples are correlated, :func:`orchestrator.numerics.block_sem`), ``n``.
+    block means: the samples are correlated, :func:`orchestrator.numerics.block_sem`), ``n``, and the
+    steadiness of the window: ``mu_drift`` ± ``mu_drift_se``, the change of μ across it from a line
+    through the 8 block means (:func:`orchestrator.numerics.block_drift`), and ``mu_steady``,
+    |drift| ≤ 2 standard errors (no trend the window's own fluctuations do not explain).
     """
     tw = _pick(frames, "torque", torque_wall)
     fw = _pick(frames, "force", force_wall)
@@ -85,6 +88,9 @@ def analyze_friction(frames, radius: float | None = None, torque_wall: str | Non
     scal = {"mu_mean": float(mu.mean()) if mu.size else np.nan, "mu_std": float(mu.std(ddof=1)) if mu.size > 1 else np.nan,
             "mu_sem": block_sem(mu),
             "n": int(mu.size), "radius_m": radius, "torque_wall": tw, "force_wall": fw, "geometry": geometry}
+    drift, drift_se = block_drift(mu)
+    scal.update({"mu_drift": drift, "mu_drift_se": drift_se,
+                 "mu_steady": bool(abs(drift) <= 2 * drift_se) if np.isfinite(drift_se) else None})
     return Result("friction", tables={"friction": df}, scalars=scal,
                   options={"radius": radius, "torque_wall": tw, "force_wall": fw, "geometry": geometry,
                            "steady_from": steady_from, "steady_control": steady_control}, plotter=plot_friction)

@@ -178,7 +178,14 @@ def plot_friction(res, **kw):
         if start is not None and len(t):      # the window the mean and its ± are taken over
             s0 = np.degrees(start) if res.options.get("steady_control") == "angle" else start
             s1 = np.degrees(t[x].max()) if x == "angle" else t[x].max()
-            ax.axvspan(s0, s1, color="0.9", zorder=0, label="steady window")
+            d, se = res.scalars.get("mu_drift"), res.scalars.get("mu_drift_se")
+            label = "steady window"
+            if d is not None and se is not None and np.isfinite(se):
+                # the line through the window's block means (orchestrator.numerics.block_drift)
+                label += f": drift {d:+.3f} ± {se:.3f} ({'steady' if abs(d) <= 2 * se else 'not steady'})"
+                half = 0.5 * d * (1 + 1 / 7)           # drift is block 1 -> 8 centres: the line over the window
+                ax.plot([s0, s1], [m - half, m + half], color="C3", lw=1, ls=":")
+            ax.axvspan(s0, s1, color="0.9", zorder=0, label=label)
         ax.legend(fontsize=8)
     ax.set_xlabel("angle [deg]" if x == "angle" else "time [s]"); ax.set_ylabel(r"$\mu_{macro}$")
     return fig
