@@ -110,7 +110,7 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
         rows.append(KeyResult("μ_macro (steady)", s.get("mu_mean", np.nan), "", s.get("mu_std"),
                               f"std over {n} samples of the steady window", "not quoted (particle μ = 0.58, §3.2)"))
         if s.get("mu_sem") is not None:
-            rows.append(KeyResult("μ_macro: standard error of the mean", s.get("mu_sem"), "", None,
+            rows.append(KeyResult("μ_macro: standard error of the mean", float(f"{s['mu_sem']:.2g}"), "", None,
                                   "from 8 block means (the samples are correlated)"))
         if s.get("mu_drift") is not None and s.get("mu_steady") is not None:
             rows.append(KeyResult("μ_macro: drift across the steady window (steady: |drift| ≤ 2 se)",
