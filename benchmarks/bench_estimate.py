@@ -34,6 +34,7 @@ from orchestrator.case import load_case
 from orchestrator.clock import (estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_at_size,
                                 speed_ratio)
 from orchestrator.runner import run_case
+from engines.base import UnsupportedFeature
 
 HERE = Path(__file__).resolve().parent
 
@@ -50,7 +51,11 @@ def main(argv=None) -> int:
         for path in a.run:
             case = load_case(path)
             for eng in a.engine or case.engines:
-                out = run_case(case, eng, runs_root=root, progress=False, analyze=False)
+                try:
+                    out = run_case(case, eng, runs_root=root, progress=False, analyze=False)
+                except UnsupportedFeature as exc:           # --engine names one that cannot run this scene
+                    print(f"{case.name} {eng}: skipped ({exc})")
+                    continue
                 print(f"{case.name} {eng}: {out.status} ({'reused' if out.reused else 'ran'})")
         roots.append(root)
     samples = samples_from_runs(roots)

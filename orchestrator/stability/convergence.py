@@ -29,6 +29,7 @@ from ..registry import get_scene
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
+from .observables import SPREAD_SUFFIXES
 from .sweep import _finished, nested
 from ..analysis._common import save_figure
 
@@ -139,7 +140,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             # the reference rung's run of each seed (the ladder's one run without seeds)
             ref_of = {t["seed"]: k for k, t in enumerate(tasks) if str(t["point"][knob]) == str(ref_v)}
             ref_obs_of = {sd: (results[k] or {}).get("observables") or {} for sd, k in ref_of.items()}
-            keys = sorted({k for o in ref_obs_of.values() for k in o if not k.endswith(("_sem", "_std", "_error"))
+            keys = sorted({k for o in ref_obs_of.values() for k in o if not k.endswith(SPREAD_SUFFIXES + ("_error",))
                            and (observables_used is None or k in observables_used)})
             for k, (t, r) in enumerate(zip(tasks, results)):
                 obs = r.get("observables") or {}
