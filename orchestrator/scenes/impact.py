@@ -128,6 +128,7 @@ class ImpactScene(base.Scene):
     section = Scene
     honoured = frozenset({"output.contacts", "output.stress", "initial_packing"})
     controls = {}
+    count_field = None          # one sphere per angle: no grain count to ladder
 
     required_features = staticmethod(required_features)
     derive = staticmethod(derive)

@@ -39,6 +39,12 @@ _RATE_FIELDS = ("inertial_number", "compression_inertial_number", "quasi_static_
 
 def knob_overrides(case_path, knob: str, value) -> dict:
     """The nested overrides that set ``knob`` to ``value`` on the case at ``case_path``."""
+    if knob in KNOBS:
+        try:
+            float(value) if knob != "count" else int(value)
+        except (TypeError, ValueError):
+            kind = "a whole number of grains" if knob == "count" else "a number"
+            raise CaseError(case_path, [f"--knob {knob} --values: {value!r} is not {kind}"]) from None
     if knob == "dt_fraction":
         return {"timestep": {"fraction": float(value)}}
     base = load_case(case_path)
@@ -59,9 +65,9 @@ def knob_overrides(case_path, knob: str, value) -> dict:
             try:
                 return {"scene": scene.size_overrides(base.scene, float(value))}
             except ValueError as exc:
-                raise CaseError(f"{case_path}: --knob size_scale: {exc}") from None
+                raise CaseError(case_path, [f"--knob size_scale: {exc}"]) from None
         if scene.count_field is None:
-            raise CaseError(f"{case_path}: --knob count: the {base.scene.kind} scene has no grain count")
+            raise CaseError(case_path, [f"--knob count: the {base.scene.kind} scene has no grain count"])
         return {"scene": {scene.count_field: int(value)}}
     return nested({knob: value})
 

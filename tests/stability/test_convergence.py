@@ -141,6 +141,13 @@ def test_size_and_count_knobs_scale_each_scene_as_it_defines_its_size():
     assert t.scene.grains == 250
     t, _ = derived("triaxial_small.yaml", "count", 1000)
     assert t.scene.grains == 1000
+    # a scene without the knob, or a value that is not one, is one message naming the case and knob
+    from orchestrator.case import CaseError
+    impact = cases / "verification" / "chung_ooi_1_sphere_sphere_glass.yaml"
+    for knob, value, says in (("size_scale", 2, "no size_scale knob"), ("count", 10, "no grain count"),
+                              ("count", "abc", "'abc' is not a whole number")):
+        with pytest.raises(CaseError, match=says):
+            knob_overrides(impact if value != "abc" else cases / "triaxial_small.yaml", knob, value)
     # h = 1/size: the ideal limit is the infinite system
     assert fidelity_distance("size_scale", [2.0])[0] == pytest.approx(0.5)
     assert knob_value("size_scale", 0.25) == pytest.approx(4.0)
