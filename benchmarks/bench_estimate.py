@@ -12,7 +12,7 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
   predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind);
 - ``machine``: the package table times this machine's speed as the *other* quiet runs of the same
   engine given here measure it (their :func:`orchestrator.clock.speed_ratio`, those of the same
-  scene where there are any, at this run's size by :func:`orchestrator.clock.speed_at_size`: what
+  scene where there are any, at this run's size: :func:`orchestrator.clock.speed_factor`, what
   ``run --dry-run`` prints once the machine has recorded them; "n/a" without such a run).
 
 ``load`` is the machine's mean load average over the run's cores (``orchestrator.attempts``; "-"
@@ -31,7 +31,7 @@ from pathlib import Path
 
 from orchestrator.case import load_case
 
-from orchestrator.clock import (estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_at_size,
+from orchestrator.clock import (estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_factor,
                                 speed_ratio)
 from orchestrator.runner import run_case
 from engines.base import UnsupportedFeature
@@ -75,14 +75,10 @@ def main(argv=None) -> int:
         loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
-        known = [o for o in samples if o.engine == s.engine and o.source != s.source
-                 and ratio_of[o.source] is not None]
-        same = [o for o in known if o.scene == s.scene]           # as machine_factor: the scene's own first
-        use = same or known
+        mf = speed_factor([(o.scene, o.n_particles, ratio_of[o.source]) for o in samples
+                           if o.engine == s.engine and o.source != s.source], s.scene, s.n_particles)
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
-        factor = (speed_at_size([o.n_particles for o in use], [ratio_of[o.source] for o in use],
-                                s.n_particles if same else None) if use else math.nan)
-        r3 = factor * pk / s.engine_s if use and pk == pk else math.nan
+        r3 = mf[0] * pk / s.engine_s if mf and pk == pk else math.nan
         if r2 == r2:
             worst = max(worst or 0.0, abs(r2 - 1))
             if not s.shared:

@@ -132,9 +132,9 @@ def cmd_clock(args) -> int:
     con.print(t)
     speeds = {eng: machine_factor(eng) for eng in sorted(load_table())}
     said = [f"{eng} × {f:.2f} ({k} run(s))" for eng, (f, k) in ((e, v) for e, v in speeds.items() if v)]
-    con.print(f"this machine ({machine_id()}): " + ("; ".join(said) + " of the package table's times (medians; an estimate takes its scene's runs at its size, "
-              "orchestrator.clock.speed_at_size)"
-              if said else "no complete run recorded yet") + f" ({speed_table_path()})", markup=False)
+    how = ("; ".join(said) + " of the package table's times (medians; an estimate takes its scene's runs at "
+           "its size, orchestrator.clock.speed_factor)") if said else "no complete run recorded yet"
+    con.print(f"this machine ({machine_id()}): {how} ({speed_table_path()})", markup=False)
     return 0
 
 

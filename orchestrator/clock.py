@@ -66,7 +66,8 @@ from .resources import data_file
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "expected_steps", "step_plan",
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
-           "machine_id", "record_speed", "machine_factor", "speed_at_size", "speed_table_path", "speed_ratio"]
+           "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
+           "speed_ratio"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -244,17 +245,11 @@ def _keep_recent(rows: list) -> list:
     """The last :data:`SPEED_KEEP` rows of each scene and size group (rows without a count: one
     group per scene), in their order."""
     ns = np.array([float(r.get("n") or 0) for r in rows])
-    sized = ns > 0
     group = np.full(len(rows), -1)
-    if sized.any():
-        group[sized] = _size_groups(ns[sized])
-    seen: dict = {}
-    keep = [False] * len(rows)
-    for i in range(len(rows) - 1, -1, -1):
-        key = (rows[i].get("scene"), int(group[i]))
-        seen[key] = seen.get(key, 0) + 1
-        keep[i] = seen[key] <= SPEED_KEEP
-    return [r for r, k in zip(rows, keep) if k]
+    if (ns > 0).any():
+        group[ns > 0] = _size_groups(ns[ns > 0])
+    keys = [(r.get("scene"), int(g)) for r, g in zip(rows, group)]
+    return [r for i, r in enumerate(rows) if keys[i + 1:].count(keys[i]) < SPEED_KEEP]
 
 
 def speed_at_size(ns, ratios, n: int | None) -> float:
@@ -279,19 +274,27 @@ def speed_at_size(ns, ratios, n: int | None) -> float:
     return float(np.exp(np.interp(np.log(max(n, 1)), np.log(gn[order]), np.log(gr[order]))))
 
 
-def machine_factor(engine: str, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
-    """(ratio of engine time to the package table's prediction, runs it rests on) of ``engine`` on
-    this machine (:func:`record_speed`): from its runs of ``scene`` where there are any (the ratio
-    differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42), else from
-    all its runs; at ``n_particles`` (:func:`speed_at_size`) where the runs recorded their counts.
-    None before a run has been recorded."""
-    rows = [r for r in _speed_table().get(machine_id(), {}).get(engine) or []
-            if isinstance(r.get("ratio"), (int, float)) and r["ratio"] > 0]
-    same = [r for r in rows if scene is not None and r.get("scene") == scene]
-    use = same or rows
+def speed_factor(records, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
+    """(speed ratio [-], records it rests on) for a run of ``scene`` with ``n_particles``, from
+    ``records`` of one engine, each ``(scene, particle count or None, ratio)``: those of ``scene``
+    where there are any, at ``n_particles`` (:func:`speed_at_size`); else all of them, their median
+    (the ratio differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42).
+    None without a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py``
+    apply."""
+    records = [r for r in records if r[2] is not None and r[2] > 0]
+    same = [r for r in records if scene is not None and r[0] == scene]
+    use = same or records
     if not use:
         return None
-    return speed_at_size([r.get("n") for r in use], [r["ratio"] for r in use], n_particles if same else None), len(use)
+    return speed_at_size([r[1] for r in use], [r[2] for r in use], n_particles if same else None), len(use)
+
+
+def machine_factor(engine: str, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
+    """(ratio of engine time to the package table's prediction, runs it rests on) of ``engine`` on
+    this machine (:func:`record_speed`), by :func:`speed_factor`; None before a run has been recorded."""
+    rows = _speed_table().get(machine_id(), {}).get(engine) or []
+    return speed_factor([(r.get("scene"), r.get("n"), r["ratio"]) for r in rows
+                         if isinstance(r.get("ratio"), (int, float))], scene, n_particles)
 
 
 def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, ranks: int = 1,

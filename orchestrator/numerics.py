@@ -35,7 +35,11 @@ def running_mean(x: np.ndarray, rows: int, mode: str = "same") -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def block_sem(x: np.ndarray, blocks: int = 8) -> float:
+#: contiguous blocks of a correlated series that :func:`block_sem` and :func:`block_drift` average
+BLOCKS = 8
+
+
+def block_sem(x: np.ndarray, blocks: int = BLOCKS) -> float:
     """Standard error of the mean of a correlated series (a steady-state window of μ_macro) from
     ``blocks`` contiguous block means (fewer when the series is shorter): blocks longer than the
     correlation time are nearly independent. NaN with fewer than two blocks. Unit: that of ``x``."""
@@ -47,7 +51,7 @@ def block_sem(x: np.ndarray, blocks: int = 8) -> float:
     return float(bm.std(ddof=1) / np.sqrt(nb))
 
 
-def block_drift(x: np.ndarray, blocks: int = 8) -> tuple[float, float]:
+def block_drift(x: np.ndarray, blocks: int = BLOCKS) -> tuple[float, float]:
     """(drift, its standard error) of a correlated series across its length, unit that of ``x``:
     a straight line fitted to ``blocks`` contiguous block means (as :func:`block_sem`), its change
     from the first block's centre to the last's, with the slope's standard error from the block

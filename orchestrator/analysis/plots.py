@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from ._fits import erf_profile, fractal_dimension
+from ..numerics import BLOCKS
 
 __all__ = ["plot_d2min", "plot_rdf", "plot_coordination", "plot_clusters", "plot_profiles", "plot_shearband",
            "plot_friction", "plot_displacements", "plot_stress", "plot_fabric", "plot_forcechains",
@@ -178,12 +179,14 @@ def plot_friction(res, **kw):
         if start is not None and len(t):      # the window the mean and its ± are taken over
             s0 = np.degrees(start) if res.options.get("steady_control") == "angle" else start
             s1 = np.degrees(t[x].max()) if x == "angle" else t[x].max()
-            d, se = res.scalars.get("mu_drift"), res.scalars.get("mu_drift_se")
+            d, se, steady = (res.scalars.get(k) for k in ("mu_drift", "mu_drift_se", "mu_steady"))
             label = "steady window"
-            if d is not None and se is not None and np.isfinite(se):
-                # the line through the window's block means (orchestrator.numerics.block_drift)
-                label += f": drift {d:+.3f} ± {se:.3f} ({'steady' if abs(d) <= 2 * se else 'not steady'})"
-                half = 0.5 * d * (1 + 1 / 7)           # drift is block 1 -> 8 centres: the line over the window
+            if steady is not None:
+                # the line through the window's block means (orchestrator.numerics.block_drift): its
+                # drift runs from the first block's centre to the last's, nb - 1 of the nb blocks
+                label += f": drift {d:+.3f} ± {se:.3f} ({'steady' if steady else 'not steady'})"
+                nb = min(BLOCKS, int(res.scalars.get("n", BLOCKS)))
+                half = 0.5 * d * nb / (nb - 1)
                 ax.plot([s0, s1], [m - half, m + half], color="C3", lw=1, ls=":")
             ax.axvspan(s0, s1, color="0.9", zorder=0, label=label)
         ax.legend(fontsize=8)

@@ -137,13 +137,12 @@ class Scene(ABC):
                            f"(scenes that realise it: {', '.join(_scenes_honouring(term)) or 'none'})")
         return out
 
-    def size_overrides(self, section, scale: float) -> dict:
+    def size_overrides(self, section, scale: float) -> dict | None:
         """The ``scene:`` overrides that scale the system's size by ``scale`` [-] at fixed grains
         (the convergence knob ``size_scale``): the lengths a finite-size error goes with, the
-        grains and the protocol kept. ``section`` is the case's ``scene:`` model. The default: the
-        scene has no size knob (a :class:`ValueError` naming the scene)."""
-        raise ValueError(f"the {self.kind} scene has no size_scale knob; ladder one of its size fields "
-                         f"instead (--knob scene.FIELD)")
+        grains and the protocol kept. ``section`` is the case's ``scene:`` model. None (the
+        default): the scene has no size knob."""
+        return None
 
     # -- physics ---------------------------------------------------------------------------
     @abstractmethod

@@ -168,8 +168,8 @@ def add_parsers(sub):
 
     c = sub.add_parser("convergence", help="error against run time over a ladder of one knob")
     c.add_argument("case")
-    c.add_argument("--knob", required=True, help="dt_fraction, stiffness_scale, rate_scale, particle_scale, count, size_scale, "
-                                                 "or a dotted case field")
+    c.add_argument("--knob", required=True, help="dt_fraction, stiffness_scale, rate_scale, particle_scale, count, "
+                                                 "size_scale, or a dotted case field")
     c.add_argument("--values", nargs="+", required=True, help="ladder values, cheapest first (the last is the "
                                                               "reference unless --reference)")
     c.add_argument("--reference", help="the value to compare against (default: the last)")

@@ -59,16 +59,17 @@ def knob_overrides(case_path, knob: str, value) -> dict:
     if knob == "particle_scale":
         p = base.scene.psd
         return {"scene": {"psd": {k: f"{getattr(p, k) * float(value)!r} m" for k in ("median", "d_min", "d_max")}}}
-    if knob in ("count", "size_scale"):
-        scene = get_scene(base.scene.kind)
-        if knob == "size_scale":
-            try:
-                return {"scene": scene.size_overrides(base.scene, float(value))}
-            except ValueError as exc:
-                raise CaseError(case_path, [f"--knob size_scale: {exc}"]) from None
-        if scene.count_field is None:
+    if knob == "size_scale":
+        sized = get_scene(base.scene.kind).size_overrides(base.scene, float(value))
+        if sized is None:
+            raise CaseError(case_path, [f"--knob size_scale: the {base.scene.kind} scene has no size_scale knob; "
+                                        "ladder one of its size fields instead (--knob scene.FIELD)"])
+        return {"scene": sized}
+    if knob == "count":
+        field = get_scene(base.scene.kind).count_field
+        if field is None:
             raise CaseError(case_path, [f"--knob count: the {base.scene.kind} scene has no grain count"])
-        return {"scene": {scene.count_field: int(value)}}
+        return {"scene": {field: int(value)}}
     return nested({knob: value})
 
 
