@@ -19,13 +19,16 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
 for runs recorded before it was kept). A multi-rank run with a load above its cores by more than
 half a core is marked ``shared``: its wall time (the time that counts for ranks, which poll while
 they wait) measured the other runs too; the fit leaves it out, and the largest error is given with
-and without such runs.
+and without such runs. A run marked ``off-plan`` left its scene's step plan (a triaxial whose stage
+1 ran out of chunks before it converged, ``isotropic_end.converged`` false, and skipped the drag ramp): the estimate is for a run that
+follows the plan, and the ``machine`` column's largest error is given with and without such runs.
 
 Then ``orchestrator clock refresh RUNS --package`` stores the fit of all of them.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 
@@ -65,6 +68,7 @@ def main(argv=None) -> int:
     package = _package()
     ratio_of = {s.source: speed_ratio(s, package) for s in samples}     # each run's speed, read once
     worst = worst_quiet = None
+    machine_err = {"all": None, "kept": None}   # the machine column's largest error: every run; quiet, on-plan runs
     for s in samples:
         # what `run --dry-run` printed before the run: the step budget, or where the scene decides its
         # step count while it runs (triaxial stage 1), the steps the engine's measured runs took
@@ -83,15 +87,35 @@ def main(argv=None) -> int:
             worst = max(worst or 0.0, abs(r2 - 1))
             if not s.shared:
                 worst_quiet = max(worst_quiet or 0.0, abs(r2 - 1))
+        # a run that left its scene's step plan (a triaxial whose stage 1 ran out of chunks unconverged
+        # and skipped the drag ramp): the estimate is for a run that follows it
+        off_plan = _stage1_unconverged(Path(s.source))
+        if r3 == r3:
+            machine_err["all"] = max(machine_err["all"] or 0.0, abs(r3 - 1))
+            if not (s.shared or off_plan):
+                machine_err["kept"] = max(machine_err["kept"] or 0.0, abs(r3 - 1))
         load = "-" if s.load is None else f"{s.load:.1f}/{s.cores}"
         print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {s.ranks:2d} {s.engine_s:9.1f} "
               f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {r3:7.2f} {load:>9s}  {Path(s.source).name}"
-              + ("  shared" if s.shared else ""))
+              + ("  shared" if s.shared else "") + ("  off-plan" if off_plan else ""))
     print("largest leave-one-out error: " + (f"{100 * worst:.0f} % (floor: 30 %)" if worst is not None
           else "n/a (no run has another of its engine and scene to be predicted from)"))
     if worst_quiet is not None and worst_quiet != worst:
         print(f"largest leave-one-out error, runs that did not share the machine: {100 * worst_quiet:.0f} %")
+    if machine_err["all"] is not None:
+        print(f"largest machine-column error: {100 * machine_err['all']:.0f} % (floor: 30 %)"
+              + (f"; runs that neither shared the machine nor left their step plan: {100 * machine_err['kept']:.0f} %"
+                 if machine_err["kept"] is not None and machine_err["kept"] != machine_err["all"] else ""))
     return 0
+
+
+def _stage1_unconverged(run_dir: Path) -> bool:
+    """True when the run says its stage 1 ended unconverged (the triaxial's ``isotropic_end``)."""
+    try:
+        scene = json.loads((run_dir / "summary.json").read_text()).get("scene")
+    except (OSError, ValueError):
+        return False
+    return isinstance(scene, dict) and (scene.get("isotropic_end") or {}).get("converged") is False
 
 
 def _package() -> dict:
