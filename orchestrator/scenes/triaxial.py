@@ -522,10 +522,18 @@ def step_plan(scene_params) -> base.StepPlan:
     ``iso.max_chunks`` chunks; the drag ramp's chunks and the loading are fixed): the step count
     a run takes is ``drag_ramp_steps + shear_steps + chunk * (chunks it took)``. The clock counts
     stage 1 in lengths of the pressure ramp (``iso.ramp_steps``, the compression time scale at the
-    stage's inertial number): the chunk is two frame intervals of the loading, not a stage-1 time."""
+    stage's inertial number): the chunk is two frame intervals of the loading, not a stage-1 time.
+
+    The variable part holds the pressure ramp too: both decks run it to the first chunk boundary
+    at or after ``ramp_steps`` (``ramp_end`` in the LIGGGHTS deck; YADE's first test there) before
+    the ``max_chunks`` tested chunks, so a run takes at most ``ceil(ramp_steps / chunk) +
+    max_chunks`` chunks besides the fixed part (LIGGGHTS, triaxial_small with I x 2: 5 ramp chunks,
+    9 tested with the drag, 20 of drag ramp, 7 tested without: 21 chunks and the fixed part)."""
     iso = scene_params["iso"]
+    chunk = int(iso["chunk"])
+    ramp_chunks = -(-int(iso.get("ramp_steps") or 0) // chunk)
     return base.StepPlan(fixed=int(iso["drag_ramp_steps"]) + int(scene_params["shear_steps"]),
-                         unit=int(iso["chunk"]), max_units=int(iso["max_chunks"]),
+                         unit=chunk, max_units=int(iso["max_chunks"]) + ramp_chunks,
                          scale=int(iso.get("ramp_steps") or 0))
 
 
