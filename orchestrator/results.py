@@ -31,6 +31,7 @@ import pandas as pd
 import yaml
 
 from .attempts import run_cost
+from .scenes.shear_cell import COMPRESSION_TOLERANCE
 
 __all__ = ["KeyResult", "key_results", "format_measure", "results_frame"]
 
@@ -149,7 +150,7 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
             if isinstance(v, dict) and v.get("relative_error") is not None:
                 e = float(v["relative_error"])
                 rows.append(KeyResult(f"servo force vs target at the end of {k.replace('_', ' ')} (|e| ≤ 2 %)",
-                                      float(f"{e * 100:.2g}"), "%", None, "", "", ok=abs(e) <= 0.02))
+                                      float(f"{e * 100:.2g}"), "%", None, "", "", ok=abs(e) <= COMPRESSION_TOLERANCE))
     return rows
 
 
@@ -169,6 +170,12 @@ def _triaxial(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict, s
             KeyResult("final volumetric strain (compression +)", 100 * s.get("final_volumetric_strain", np.nan), "%"),
         ]
     iso = (summary.get("scene") or {}).get("isotropic_end") or summary.get("isotropic_end") or {}
+    if isinstance(iso.get("converged"), bool) and isinstance(iso.get("sigma1_error"), (int, float)):
+        tol = ((params.get("scene") or {}).get("iso") or {}).get("tolerance")
+        rows.append(KeyResult("stage 1 at p when loading began: σ1/p, σ3/p" + (f" (within {tol:g})" if tol else ""),
+                              f"{iso['sigma1_error'] + 1:.3f}, {iso.get('sigma3_error', float('nan')) + 1:.3f}"
+                              + ("" if iso["converged"] else ": unconverged, loading began from this state"),
+                              ok=iso["converged"]))
     e = iso.get("void_ratio") or {}
     if isinstance(e.get("interior"), (int, float)):
         rows.append(KeyResult("void ratio at the start of loading, interior", float(e["interior"]), "", None, "",

@@ -173,6 +173,14 @@ class Scene(ABC):
         return StabilityInputs(n_particles=int(getattr(sc, "n", 0)), total_steps=int(getattr(sc, "steps", 0)),
                                box_lo=getattr(sc, "box_lo", None), box_hi=getattr(sc, "box_hi", None))
 
+    def sample_problems(self, run_dir: Path) -> list[str]:
+        """Why the complete run in ``run_dir`` did not prepare the sample its case asks for, one
+        sentence each, from the run's own checks (empty, the default: nothing to say). A run with a
+        problem still ran and is kept; a convergence ladder leaves it out of its extrapolation
+        (:func:`orchestrator.stability.convergence.ladder`), as its observables measure another
+        sample than the rung's."""
+        return []
+
     def step_plan(self, scene_params: Mapping) -> StepPlan | None:
         """The variable part of the run's step count (:class:`StepPlan`), from the scene's numbers
         (``params.json``'s ``scene``); None (the default): the derived ``steps`` are what a run takes."""

@@ -28,6 +28,7 @@ to both engines.
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -535,6 +536,11 @@ def _frame_controls(params, steps) -> dict:
     return {"angle": angle, "stage": stage}
 
 
+#: the compression check's tolerance: the piston's mean force over the last averaging window of the
+#: compression stage within this fraction of the target, else the sample is not the case's [-]
+COMPRESSION_TOLERANCE = 0.02
+
+
 def _compression_check(params, time, step, force_z) -> dict:
     sc = params["scene"]
     a, b = sc["stages"]["compress"]
@@ -623,6 +629,19 @@ class ShearCellScene(base.Scene):
             torsion_coefficient=c.torsion_coefficient)
 
     prepare = staticmethod(prepare)
+
+    def sample_problems(self, run_dir):
+        """The compression stage missed the load: the piston's mean force over the stage's last
+        averaging window more than :data:`COMPRESSION_TOLERANCE` off the target
+        (``shear_cell_checks.json``)."""
+        try:
+            chk = json.loads((Path(run_dir) / "shear_cell_checks.json").read_text())["compression"]
+        except (OSError, ValueError, KeyError):
+            return []
+        e = chk.get("relative_error")
+        if e is None or abs(e) <= COMPRESSION_TOLERANCE:
+            return []
+        return [f"compression ended {100 * e:+.1f} % off the target load (tolerance ± {100 * COMPRESSION_TOLERANCE:g} %)"]
 
     def post(self, run_dir, params, output):
         """Wall series from the sampler's rows and the per-frame ``angle``/``stage`` controls of

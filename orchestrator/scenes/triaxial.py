@@ -517,6 +517,20 @@ def _sample_size_uncached(case):
     return D * k, H * k, n, d
 
 
+def stage1_problems(run_dir: Path) -> list[str]:
+    """The run's stage-1 convergence as a problem sentence (empty: converged, or not reported)."""
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        tol = json.loads((run_dir / "params.json").read_text())["scene"]["iso"]["tolerance"]
+    except (OSError, ValueError, KeyError):
+        return []
+    iso = (summary.get("scene") or {}).get("isotropic_end") or {}
+    if iso.get("converged") is not False:
+        return []
+    return [f"stage 1 ended unconverged: σ1/p = {iso.get('sigma1_error', math.nan) + 1:.3f}, "
+            f"σ3/p = {iso.get('sigma3_error', math.nan) + 1:.3f} (tolerance {tol:g}) when loading began"]
+
+
 def step_plan(scene_params) -> base.StepPlan:
     """Stage 1 goes on chunk by chunk until the stresses are within tolerance (at most
     ``iso.max_chunks`` chunks; the drag ramp's chunks and the loading are fixed): the step count
@@ -1146,6 +1160,12 @@ class TriaxialScene(base.Scene):
     stability_inputs = staticmethod(stability_inputs)
     prepare = staticmethod(prepare)
     step_plan = staticmethod(step_plan)
+
+    def sample_problems(self, run_dir):
+        """Stage 1 ended unconverged (``isotropic_end.converged`` false: its last chunk means of σ1
+        or σ3 outside ``isotropic.tolerance`` of p after ``isotropic.max_chunks`` chunks, and the
+        loading began from there)."""
+        return stage1_problems(Path(run_dir))
 
     def post(self, run_dir, params, output):
         return compute_extras(run_dir, params, output.frame_steps, output.positions)

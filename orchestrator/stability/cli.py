@@ -77,7 +77,7 @@ def cmd_convergence(args) -> int:
                  workers=args.workers, plot=args.plot or Path(args.runs) / "convergence" /
                  f"{Path(args.case).stem}-{args.knob}.png", full=args.full, seeds=args.seeds)
     df = out["table"]
-    cols = ["engine", args.knob] + (["seed"] if args.seeds else []) + ["status", "engine_time_s", "error"] \
+    cols = ["engine", args.knob] + (["seed"] if args.seeds else []) + ["status", "sample", "engine_time_s", "error"] \
         + [c for c in df.columns if c.startswith("err_")]
     show = df[cols].rename(columns=lambda c: c.replace("err_", "e:"))
     _print_df(show, f"Error against run time: {args.case}, knob {args.knob} (e: relative errors)")

@@ -110,6 +110,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     the same seed."""
     import pandas as pd
     case0 = load_case(case_path)
+    scene = get_scene(case0.scene.kind)
     engines = engines or case0.engines
     rows = []
     ex = get_executor(scheduler, workers)
@@ -152,7 +153,9 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             for k, (t, r) in enumerate(zip(tasks, results)):
                 obs = r.get("observables") or {}
                 ref_obs = ref_obs_of.get(t["seed"], {})
+                problems = scene.sample_problems(Path(t["run_dir"])) if r.get("status") == "complete" else []
                 row = {"engine": eng, knob: t["point"][knob], "seed": t["seed"], "status": r.get("status"),
+                       "sample": "; ".join(problems) or ("ok" if r.get("status") == "complete" else ""),
                        "engine_time_s": r.get("engine_time"), "total_time_s": r.get("total_time"),
                        "reference": k == ref_of.get(t["seed"]), "run_id": t["run_id"]}
                 errs = []
@@ -186,9 +189,9 @@ def extrapolations(df, knob: str, full=None, tolerance: float = 0.05):
     complete rungs."""
     import pandas as pd
     rows = []
-    skip = {"engine", knob, "seed", "status", "engine_time_s", "total_time_s", "reference", "run_id", "error"}
+    skip = {"engine", knob, "seed", "status", "sample", "engine_time_s", "total_time_s", "reference", "run_id", "error"}
     for eng, g in df.groupby("engine"):
-        g = g[g["status"] == "complete"]
+        g = usable(g)
         for key in [c for c in g.columns if c not in skip and not c.startswith("err_") and not c.endswith("_sem")]:
             vals, y, sem, times = rung_means(g, knob, key)
             r = extrapolate(knob, vals, y, y_sem=sem, full=full, tolerance=tolerance, times=times)
@@ -196,6 +199,15 @@ def extrapolations(df, knob: str, full=None, tolerance: float = 0.05):
                 rows.append({"engine": eng, "observable": key, **r})
     return pd.DataFrame(rows, columns=["engine", "observable", "rungs", "h_full", "value_full", "sem_full", "slope",
                                        "cheapest", "cheapest_time_s", "where", "note"])
+
+
+def usable(g):
+    """The complete runs whose sample is the case's (column ``sample`` "ok", or absent): what the
+    extrapolation and the recommendation rest on. A run whose scene reports a problem with its
+    sample (:meth:`orchestrator.scenes.base.Scene.sample_problems`, e.g. a triaxial whose stage 1
+    ended unconverged) stays in the table, marked."""
+    g = g[g["status"] == "complete"]
+    return g[g["sample"] == "ok"] if "sample" in g else g
 
 
 def rung_means(g, knob: str, key: str):
@@ -248,7 +260,8 @@ def recommend(df, knob: str, target_error: float) -> dict:
         e = pd.to_numeric(g["error"], errors="coerce").to_numpy(float)
         e_plot = np.where(g["reference"], 0.0, e)
         front = pareto(t, e_plot)
-        ok = g[(~g["reference"]) & (g["error"] <= target_error)]
+        ok = usable(g[~g["reference"]])
+        ok = ok[ok["error"] <= target_error]
         if len(ok):
             best = ok.loc[ok["engine_time_s"].astype(float).idxmin()]
             out[eng] = {knob: _py(best[knob]), "error": float(best["error"]), "engine_time_s": float(best["engine_time_s"]),
@@ -284,6 +297,11 @@ def plot_ladder(df, knob: str, path, target_error: float, ext=None):
             continue
         t = pd.to_numeric(g["engine_time_s"], errors="coerce").to_numpy(float)
         e = pd.to_numeric(g["error"], errors="coerce").to_numpy(float)
+        good = g.index.isin(usable(g).index)
+        bad = np.isfinite(e) & (e > 0) & ~good
+        if bad.any():        # runs whose sample is not the case's: shown, out of the front
+            ax.loglog(t[bad], e[bad], "x", color="grey", label=f"{eng}: sample not the case's (left out)")
+        e = np.where(good, e, np.nan)
         ok = np.isfinite(e) & (e > 0)
         ax.loglog(t[ok], e[ok], "o", label=eng)
         for tt, ee, v in zip(t[ok], e[ok], g[knob].to_numpy()[ok]):
@@ -301,7 +319,7 @@ def plot_ladder(df, knob: str, path, target_error: float, ext=None):
         for (eng, obs), e in ext.groupby(["engine", "observable"]):
             e = e.iloc[0]
             y_full = e["value_full"]
-            g = df[(df["engine"] == eng) & (df["status"] == "complete")]
+            g = usable(df[df["engine"] == eng])
             if not np.isfinite(y_full) or y_full == 0 or obs not in g:
                 continue
             h = fidelity_distance(knob, g[knob].to_numpy(float))

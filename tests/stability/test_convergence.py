@@ -77,6 +77,37 @@ def test_seeds_give_each_rung_its_mean_and_run_to_run_error():
     assert row["sem_full"] == pytest.approx(np.sqrt(cov[0, 0]))
 
 
+def test_a_run_whose_sample_is_not_the_cases_is_marked_and_left_out_of_the_fit():
+    import pandas as pd
+    # the rows of test_seeds_...: the law y = 0.5 + 0.1 h, plus a run at rate 2 whose sample failed
+    # its scene's check (a triaxial's stage 1 unconverged) and whose value is far off the law
+    rows = [{"engine": "liggghts", "rate_scale": v, "seed": sd, "status": "complete", "sample": "ok",
+             "engine_time_s": 100 / v, "mu_macro": 0.5 + 0.1 * v} for v in (2.0, 1.0, 0.5) for sd in (1, 2)]
+    rows[1].update(sample="stage 1 ended unconverged", mu_macro=0.2)
+    ext = extrapolations(pd.DataFrame(rows), "rate_scale")
+    row = ext[ext["observable"] == "mu_macro"].iloc[0]
+    assert row["value_full"] == pytest.approx(0.5) and row["slope"] == pytest.approx(0.1)
+
+
+def test_the_triaxial_and_shear_cell_read_their_own_sample_checks(tmp_path):
+    import json
+    from orchestrator.registry import get_scene
+    tri, cell = tmp_path / "tri", tmp_path / "cell"
+    tri.mkdir(), cell.mkdir()
+    (tri / "params.json").write_text(json.dumps({"scene": {"iso": {"tolerance": 0.01}}}))
+    iso = {"converged": False, "sigma1_error": -0.015, "sigma3_error": 0.0}
+    (tri / "summary.json").write_text(json.dumps({"scene": {"isotropic_end": iso}}))
+    (msg,) = get_scene("triaxial").sample_problems(tri)
+    assert "unconverged" in msg and "0.985" in msg
+    iso["converged"] = True
+    (tri / "summary.json").write_text(json.dumps({"scene": {"isotropic_end": iso}}))
+    assert get_scene("triaxial").sample_problems(tri) == []
+    for err, n in ((-0.025, 1), (0.019, 0)):
+        (cell / "shear_cell_checks.json").write_text(json.dumps({"compression": {"relative_error": err}}))
+        assert len(get_scene("shear_cell").sample_problems(cell)) == n
+    assert get_scene("impact").sample_problems(tmp_path) == []          # nothing to say
+
+
 @pytest.mark.engine
 def test_dt_ladder(runs_root, tmp_path, engines_installed):
     # rungs below the pre-run check's safe limit for this case (0.48 of the critical step, coordination)
