@@ -35,10 +35,13 @@ def cmd_validate(args) -> int:
     con.print(f"  dt = {p['dt']:.4g} s = {p['dt_fraction']:.3g} × critical {p['dt_critical']:.4g} s "
               f"(Rayleigh {p['dt_rayleigh']:.4g} s, Hertz t_c/10 {p['dt_hertz']:.4g} s)")
     con.print(f"  features: {', '.join(p['features'])}")
-    from .sizing import describe, estimate, problems
+    from .sizing import busy_note, describe, estimate, problems
     for eng in case.engines:
         size = estimate(case, p, eng)
         con.print(f"  {eng}: {describe(size)}")
+        busy = busy_note(get_engine(eng).workers(case))
+        if busy:
+            con.print(f"  [yellow]{busy}[/yellow]")
         for prob in problems(case, size):
             con.print(f"  [yellow]{prob if prob.startswith('warning:') else 'too big: ' + prob + ' (run refuses it unless --force)'}[/yellow]")
     return 0
@@ -52,12 +55,15 @@ def cmd_run(args) -> int:
     con = _console()
     status = 0
     from .derive import derive
-    from .sizing import check_fits, describe, estimate
+    from .sizing import busy_note, check_fits, describe, estimate
     params = derive(case)
     for eng in engines:
         size = estimate(case, params, eng)
         warnings = check_fits(case, size, force=args.force)        # refuses a case too big for the machine
+        busy = busy_note(get_engine(eng).workers(case))
         con.print(f"[cyan]{eng}[/cyan]: {case.name}: {describe(size)}")
+        if busy:
+            warnings = [busy] + warnings
         for w in warnings:
             con.print(f"  [yellow]{w}[/yellow]")
         if args.dry_run:

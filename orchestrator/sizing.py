@@ -137,6 +137,26 @@ def problems(case, size: dict) -> list[str]:
     return out
 
 
+def busy_note(workers: int = 1, load: float | None = None, cores: int | None = None) -> str | None:
+    """A note when this machine is busy enough to slow the run past its estimate (None when
+    quiet): the one-minute load average ``load`` (default: the machine's) above the cores the run
+    leaves free by more than half a core. The estimate is for a quiet machine; on the 2-core
+    machine of 28 Nov 2026 a one-rank run beside other runs took 8-15 % more CPU time on LIGGGHTS
+    and LAMMPS and 12-36 % more on YADE, and two MPI ranks beside three other runs took 5-11x the
+    wall time (docs/validation.md, "This machine's speed")."""
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except OSError:                      # pragma: no cover - no load average on this platform
+            return None
+    cores = cores or os.cpu_count() or 1
+    if load <= cores - workers + 0.5:
+        return None
+    return (f"note: this machine is busy (load {load:.1f} on {cores} cores, the run adds {workers}): the estimate is "
+            f"for a quiet machine, and sharing the cores makes the run slower (one rank: 8-36 % more CPU time "
+            f"measured here; several ranks: several times the wall time)")
+
+
 def check_fits(case, size: dict, force: bool = False) -> list[str]:
     """Raise :class:`SizeError` when the case does not fit (unless ``force``); return warnings."""
     probs = problems(case, size)

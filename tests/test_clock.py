@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from orchestrator.clock import RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, refresh
+from orchestrator.sizing import busy_note
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -277,3 +278,12 @@ def test_this_machines_speed_is_interpolated_in_size_not_carried_across_sizes(tm
     assert machine_factor("liggghts", "shear_cell", 228) == (pytest.approx(0.30), 5)
     assert machine_factor("liggghts", "shear_cell") == (pytest.approx(0.43), 5)
     assert machine_factor("liggghts", "triaxial", 228) == (pytest.approx(0.43), 5)   # another scene: the median
+
+
+def test_a_busy_machine_is_said_and_a_quiet_one_is_not():
+    # 2 cores: a one-rank run leaves one core free, so a load above 1.5 shares it
+    assert busy_note(1, load=1.4, cores=2) is None
+    note = busy_note(1, load=2.7, cores=2)
+    assert note and "load 2.7 on 2 cores" in note and "quiet machine" in note
+    # a two-rank run needs both cores: any load above half a core shares them
+    assert busy_note(2, load=0.4, cores=2) is None and busy_note(2, load=0.9, cores=2)
