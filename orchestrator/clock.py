@@ -63,7 +63,7 @@ from .attempts import read_attempts, run_cost
 
 from .resources import data_file
 
-__all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "expected_steps", "step_plan",
+__all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "engine_seconds", "expected_steps", "step_plan",
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
@@ -325,6 +325,24 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     return float("nan"), f"no throughput measured for {engine}"
 
 
+def engine_seconds(summary: dict) -> float | None:
+    """A run's engine time as a quiet machine would have taken it [s], from its ``summary.json``:
+    a one-rank run's CPU time (``wall_time.engine_cpu``, from ``os.wait4``) where it is shorter than
+    the wall time, else the wall time (``wall_time.engine``); None without one. The wall time of a
+    one-rank run that shared its cores (other runs, a test suite, a paused process) is longer by the
+    load; its CPU time is not, to within 8-36 % on a 2-core machine (docs/validation.md). Not so on
+    several MPI ranks: a rank polls while it waits for one the load has descheduled (the default
+    case, 2 ranks: 201 s quiet; beside a YADE run 636 s wall and 806 s CPU, 403 s per rank), so
+    their wall time is kept."""
+    wt = summary.get("wall_time") or {}
+    wall, cpu = wt.get("engine"), wt.get("engine_cpu")
+    if not isinstance(wall, (int, float)):
+        return None
+    if isinstance(cpu, (int, float)) and cpu > 0 and max(int(summary.get("workers") or 1), 1) == 1:
+        return min(float(cpu), float(wall))
+    return float(wall)
+
+
 def _sample(run_dir: Path) -> RunSample | None:
     try:
         s = json.loads((run_dir / "summary.json").read_text())
@@ -366,14 +384,8 @@ def _sample(run_dir: Path) -> RunSample | None:
             return None
         return RunSample(s["engine"], kind, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,
                          load, cores)
-    cpu = wt.get("engine_cpu")
-    if isinstance(cpu, (int, float)) and cpu > 0 and ranks == 1:
-        # a one-rank engine's CPU time stands for its wall time on a quiet machine: the wall time of a
-        # run that shared its cores (other runs, a test suite) is longer by the load factor, its CPU
-        # time is not. Not so on several MPI ranks: a rank polls while it waits for one the load has
-        # descheduled (the default case, 2 ranks: 201 s quiet; beside a YADE run 636 s wall and
-        # 806 s CPU, 403 s per rank), so their wall time is kept
-        engine_s = min(float(cpu) / ranks, engine_s)
+    if engine_seconds(s) < engine_s:          # a one-rank run's CPU time (engine_seconds)
+        engine_s = engine_seconds(s)
         loop = engine_s - startup if startup < engine_s else engine_s
     return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir), plan, load, cores)
 

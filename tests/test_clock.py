@@ -287,3 +287,12 @@ def test_a_busy_machine_is_said_and_a_quiet_one_is_not():
     assert note and "load 2.7 on 2 cores" in note and "quiet machine" in note
     # a two-rank run needs both cores: any load above half a core shares them
     assert busy_note(2, load=0.4, cores=2) is None and busy_note(2, load=0.9, cores=2)
+
+
+def test_a_one_rank_run_counts_its_cpu_time_and_a_multi_rank_run_its_wall_time():
+    from orchestrator.clock import engine_seconds
+    # a one-rank rung paused for 7 min beside the ladder: 510 s of wall time, 70 s of CPU
+    assert engine_seconds({"workers": 1, "wall_time": {"engine": 510.3, "engine_cpu": 70.1}}) == 70.1
+    # two ranks poll while they wait: the wall time is the time
+    assert engine_seconds({"workers": 2, "wall_time": {"engine": 636.0, "engine_cpu": 806.0}}) == 636.0
+    assert engine_seconds({"wall_time": {"engine": 12.0}}) == 12.0 and engine_seconds({}) is None

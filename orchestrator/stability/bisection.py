@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from engines.base import EngineError
 
 from ..case import load_case
+from ..clock import engine_seconds
 from ..derive import derive
 from ..runner import run_case
 
@@ -74,7 +75,7 @@ def probe(case_path, engine: str, fraction: float, runs_root, overrides: dict | 
     return {"fraction": fraction, "dt": dt, "status": status, "stable": status == "complete",
             "tripped": tripped if tripped else ({"figure": "engine_failed", "message": summ.get("error")}
                                                if status == "failed" else None),
-            "engine_time": (summ.get("wall_time") or {}).get("engine")}
+            "engine_time": engine_seconds(summ)}
 
 
 def bisect(case_path, engine: str, runs_root="runs", rel_tol: float = 0.15, max_fraction: float = 64.0,
