@@ -28,7 +28,6 @@ Then ``orchestrator clock refresh RUNS --package`` stores the fit of all of them
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
@@ -37,6 +36,7 @@ from orchestrator.case import load_case
 from orchestrator.clock import (estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_factor,
                                 speed_ratio)
 from orchestrator.runner import run_case
+from orchestrator.scenes.triaxial import stage1_problems
 from engines.base import UnsupportedFeature
 
 HERE = Path(__file__).resolve().parent
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
                 worst_quiet = max(worst_quiet or 0.0, abs(r2 - 1))
         # a run that left its scene's step plan (a triaxial whose stage 1 ran out of chunks unconverged
         # and skipped the drag ramp): the estimate is for a run that follows it
-        off_plan = _stage1_unconverged(Path(s.source))
+        off_plan = s.scene == "triaxial" and bool(stage1_problems(Path(s.source)))
         if r3 == r3:
             machine_err["all"] = max(machine_err["all"] or 0.0, abs(r3 - 1))
             if not (s.shared or off_plan):
@@ -107,15 +107,6 @@ def main(argv=None) -> int:
               + (f"; runs that neither shared the machine nor left their step plan: {100 * machine_err['kept']:.0f} %"
                  if machine_err["kept"] is not None and machine_err["kept"] != machine_err["all"] else ""))
     return 0
-
-
-def _stage1_unconverged(run_dir: Path) -> bool:
-    """True when the run says its stage 1 ended unconverged (the triaxial's ``isotropic_end``)."""
-    try:
-        scene = json.loads((run_dir / "summary.json").read_text()).get("scene")
-    except (OSError, ValueError):
-        return False
-    return isinstance(scene, dict) and (scene.get("isotropic_end") or {}).get("converged") is False
 
 
 def _package() -> dict:
