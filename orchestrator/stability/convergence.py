@@ -310,7 +310,7 @@ def plot_ladder(df, knob: str, path, target_error: float, ext=None):
         if front:
             ax.loglog(t[front], e[front], "-", alpha=0.6, label=f"{eng} Pareto front")
     ax.axhline(target_error, ls="--", color="grey", label=f"target {target_error:g}")
-    ax.set_xlabel("engine wall time [s]")
+    ax.set_xlabel("engine time [s] (one rank: its CPU time)")
     ax.set_ylabel("largest relative error of the key observables [-]")
     ax.set_title(f"error against run time, knob {knob} (reference = finest)")
     ax.legend(fontsize=8)
