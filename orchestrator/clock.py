@@ -50,6 +50,7 @@ checkout, ``--package`` writes the shipped table itself).
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 from dataclasses import asdict, dataclass, field
@@ -252,41 +253,82 @@ def _keep_recent(rows: list) -> list:
     return [r for i, r in enumerate(rows) if keys[i + 1:].count(keys[i]) < SPEED_KEEP]
 
 
-def speed_at_size(ns, ratios, n: int | None) -> float:
+def _group_medians(ns, ratios) -> tuple[np.ndarray, np.ndarray]:
+    """(size of each size group [-], its median ratio [-]) of runs with counts ``ns`` > 0, by size."""
+    x, r = np.asarray(ns, float), np.asarray(ratios, float)
+    group = _size_groups(x)
+    gn = np.array([np.exp(np.median(np.log(x[group == g]))) for g in range(group.max() + 1)])
+    gr = np.array([np.median(r[group == g]) for g in range(group.max() + 1)])
+    order = np.argsort(gn)
+    return gn[order], gr[order]
+
+
+def size_trend(records) -> tuple[float, float, float] | None:
+    """(slope β [-], smallest n, largest n) of how this machine's speed ratio changes with the size,
+    ratio ∝ n^β, from ``records`` ``(scene, n, ratio)`` of one engine: the median over the scenes
+    with two sizes or more of each scene's least-squares slope of log(group median) against log n,
+    and the sizes those scenes span; None without such a scene. A machine's speed-up over the table's
+    depends on the size in much the same way in every scene of an engine (cache and memory against
+    the per-step overheads: on the 2-core machine of 28 Nov 2026, YADE's shear cell read 0.24 of
+    the table at 228 grains and 0.51 at 1 025, β = 0.5, and its triaxial 0.29 at 300 grains and
+    0.76 at 2 000), so a scene measured at one size borrows it (:func:`speed_at_size`)."""
+    slopes, lo, hi = [], math.inf, 0.0
+    for scene in {r[0] for r in records}:
+        sub = [r for r in records if r[0] == scene and r[1] and r[2]]
+        if len(sub) < 2:
+            continue
+        gn, gr = _group_medians([r[1] for r in sub], [r[2] for r in sub])
+        if len(gn) < 2:
+            continue
+        slopes.append(float(np.polyfit(np.log(gn), np.log(gr), 1)[0]))
+        lo, hi = min(lo, gn[0]), max(hi, gn[-1])
+    return (float(np.median(slopes)), lo, hi) if slopes else None
+
+
+def speed_at_size(ns, ratios, n: int | None, trend: tuple[float, float, float] | None = None) -> float:
     """This machine's speed ratio [-] for a run of ``n`` particles, from recorded runs of ``ns``
     particles and their ``ratios`` (one engine and scene): the median ratio of each size group
-    (:func:`_size_groups`), interpolated linearly in log n between the groups and held constant
-    beyond the smallest and largest (never extrapolated). A machine's speed-up over the table's
-    differs with the size (a newer machine ran LIGGGHTS' 228-grain smoke shear cell in 0.26-0.33
-    of the table's time and its 1 025-grain small cell in 0.44, 27 Nov 2026), so one median
-    carried across sizes missed by up to 2.2x (docs/validation.md). Without counts or with one
-    size: the median of all."""
+    (:func:`_size_groups`), interpolated linearly in log n between the groups. Beyond the smallest
+    and largest group the ratio is held, or with the engine's ``trend`` (:func:`size_trend`: slope β
+    over the sizes [lo, hi] other scenes measured) carried from the nearest group as n^β over the
+    part of the way that lies within [lo, hi], and held beyond: never extrapolated past what some
+    scene measured. A machine's speed-up over the table's differs with the size (a newer machine
+    ran LIGGGHTS' 228-grain smoke shear cell in 0.26-0.33 of the table's time and its 1 025-grain
+    small cell in 0.44, 27 Nov 2026), so one median carried across sizes missed by up to 2.2x
+    (docs/validation.md); YADE's 2 000-grain triaxial, predicted from its 300-grain smoke runs
+    held, by 2.6x. Without counts or with one size and no trend: the median of all."""
     r = np.asarray(ratios, float)
     x = np.asarray([float(v) if v else 0.0 for v in ns], float)
     ok = x > 0
     if n is None or ok.sum() == 0:
         return float(np.median(r))
-    x, r = x[ok], r[ok]
-    group = _size_groups(x)
-    gn = np.array([np.exp(np.median(np.log(x[group == g]))) for g in range(group.max() + 1)])
-    gr = np.array([np.median(r[group == g]) for g in range(group.max() + 1)])
-    order = np.argsort(gn)
-    return float(np.exp(np.interp(np.log(max(n, 1)), np.log(gn[order]), np.log(gr[order]))))
+    gn, gr = _group_medians(x[ok], r[ok])
+    ln = np.log(max(n, 1))
+    value = float(np.exp(np.interp(ln, np.log(gn), np.log(gr))))
+    if trend is not None and not gn[0] <= n <= gn[-1]:
+        beta, lo, hi = trend
+        edge = gn[0] if n < gn[0] else gn[-1]
+        a, b = (np.clip(np.log(v), np.log(lo), np.log(hi)) for v in (edge, max(n, 1)))
+        value *= float(np.exp(beta * (b - a)))
+    return value
 
 
 def speed_factor(records, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
     """(speed ratio [-], records it rests on) for a run of ``scene`` with ``n_particles``, from
     ``records`` of one engine, each ``(scene, particle count or None, ratio)``: those of ``scene``
-    where there are any, at ``n_particles`` (:func:`speed_at_size`); else all of them, their median
-    (the ratio differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42).
-    None without a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py``
-    apply."""
+    where there are any, at ``n_particles`` (:func:`speed_at_size`, beyond their sizes with the
+    engine's :func:`size_trend` from the other scenes); else all of them, their median (the ratio
+    differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42). None without
+    a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py`` apply."""
     records = [r for r in records if r[2] is not None and r[2] > 0]
     same = [r for r in records if scene is not None and r[0] == scene]
     use = same or records
     if not use:
         return None
-    return speed_at_size([r[1] for r in use], [r[2] for r in use], n_particles if same else None), len(use)
+    if not same:
+        return speed_at_size([r[1] for r in use], [r[2] for r in use], None), len(use)
+    trend = size_trend([r for r in records if r[0] != scene])
+    return speed_at_size([r[1] for r in use], [r[2] for r in use], n_particles, trend), len(use)
 
 
 def machine_factor(engine: str, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
@@ -421,15 +463,20 @@ def expected_steps(budget: int, plan, tp: Throughput | None) -> int:
 
 
 def samples_from_runs(paths) -> list[RunSample]:
-    """Every complete, un-resumed run under ``paths`` (run directories or runs/ trees)."""
-    out = []
+    """Every complete, un-resumed run under ``paths`` (run directories or runs/ trees), each once: a
+    directory with the name (the run's hash: engine, case, derived numbers, templates) and the
+    engine time of one already read is a copy of that run (e.g. a ladder's rung copied into another
+    ladder's tree to be reused) and would count it twice; a rerun of the same case elsewhere took
+    its own time and counts."""
+    out, seen = [], set()
     for root in paths:
         root = Path(root)
         dirs = [root] if (root / "summary.json").exists() else [p.parent for p in root.rglob("summary.json")]
         for d in sorted(dirs):
             smp = _sample(d)
-            if smp is not None:
+            if smp is not None and (d.name, smp.engine_s) not in seen:
                 out.append(smp)
+                seen.add((d.name, smp.engine_s))
     return out
 
 

@@ -296,3 +296,40 @@ def test_a_one_rank_run_counts_its_cpu_time_and_a_multi_rank_run_its_wall_time()
     # two ranks poll while they wait: the wall time is the time
     assert engine_seconds({"workers": 2, "wall_time": {"engine": 636.0, "engine_cpu": 806.0}}) == 636.0
     assert engine_seconds({"wall_time": {"engine": 12.0}}) == 12.0 and engine_seconds({}) is None
+
+
+def test_a_copied_run_counts_once_and_a_rerun_twice(tmp_path):
+    import shutil
+    from orchestrator.clock import samples_from_runs
+    src = tmp_path / "runs" / "triaxial_smoke" / "yade-0a1b2c3d4e5f"
+    src.mkdir(parents=True)
+    (src / "summary.json").write_text(json.dumps({
+        "engine": "yade", "status": "complete", "steps": 1000, "steps_run": 1000, "n_particles": 300,
+        "wall_time": {"engine": 5.0, "engine_loop": 0}}))
+    (src / "params.json").write_text(json.dumps({"scene": {"n": 300}}))
+    (src / "case.yaml").write_text("scene: {kind: triaxial}\n")
+    shutil.copytree(src, tmp_path / "other" / src.name)               # a rung copied to be reused
+    assert len(samples_from_runs([tmp_path / "runs", tmp_path / "other"])) == 1
+    rerun = tmp_path / "again" / src.name                               # the same case run again
+    shutil.copytree(src, rerun)
+    s = json.loads((rerun / "summary.json").read_text())
+    s["wall_time"]["engine"] *= 1.3
+    (rerun / "summary.json").write_text(json.dumps(s))
+    assert len(samples_from_runs([tmp_path / "runs", tmp_path / "other", tmp_path / "again"])) == 2
+
+
+def test_a_scene_measured_at_one_size_borrows_the_engines_size_trend_within_what_was_measured():
+    from orchestrator.clock import size_trend, speed_factor
+    # scene A measured at two sizes: ratio 0.25 at 200 particles, 0.5 at 1 000 (beta = ln 2 / ln 5);
+    # scene B only at 300 particles (YADE on 28 Nov 2026: shear cell 228 and 1 025, triaxial 300)
+    recs = [("A", 200, 0.25), ("A", 210, 0.25), ("A", 1000, 0.5), ("B", 300, 0.3)]
+    beta, lo, hi = size_trend([r for r in recs if r[0] == "A"])
+    assert beta == pytest.approx(np.log(2) / np.log(1000 / 205), rel=0.02) and (lo, hi) == pytest.approx((205, 1000), rel=0.02)
+    assert speed_factor(recs, "B", 300)[0] == pytest.approx(0.3)
+    assert speed_factor(recs, "B", 600)[0] == pytest.approx(0.3 * 2 ** beta)
+    # beyond the largest size any scene measured the ratio is held, not extrapolated
+    assert speed_factor(recs, "B", 5000)[0] == pytest.approx(speed_factor(recs, "B", 1000)[0])
+    # below scene B's size the trend carries it down as far as A measured
+    assert speed_factor(recs, "B", 100)[0] == pytest.approx(0.3 * (205 / 300) ** beta, rel=0.02)
+    # an engine without a scene of two sizes: held, as before
+    assert speed_factor([("B", 300, 0.3)], "B", 2000)[0] == pytest.approx(0.3)
