@@ -11,6 +11,7 @@ memory than the machine has.
 from __future__ import annotations
 
 import os
+import time
 
 from .clock import estimate_engine_time, expected_steps, load_table, step_plan
 from .registry import get_engine
@@ -137,24 +138,43 @@ def problems(case, size: dict) -> list[str]:
     return out
 
 
-def busy_note(workers: int = 1, load: float | None = None, cores: int | None = None) -> str | None:
+def busy_cores(sample_s: float = 0.25) -> float | None:
+    """Cores [-] the machine's other processes keep busy now: the share of non-idle time over
+    ``sample_s`` seconds of /proc/stat's aggregate ``cpu`` line, times the cores; None where there
+    is no /proc/stat. Not the load average, which lags by minutes (a fresh clone's set-up that has
+    just finished reads as a busy machine for a minute after it)."""
+    def read():
+        with open("/proc/stat") as f:
+            v = [float(x) for x in f.readline().split()[1:]]
+        return sum(v), v[3] + (v[4] if len(v) > 4 else 0.0)          # total, idle + iowait
+    try:
+        t0, i0 = read()
+        time.sleep(sample_s)
+        t1, i1 = read()
+    except (OSError, ValueError, IndexError):
+        return None
+    dt = t1 - t0
+    return (1.0 - (i1 - i0) / dt) * (os.cpu_count() or 1) if dt > 0 else None
+
+
+def busy_note(workers: int = 1, busy: float | None = None, cores: int | None = None) -> str | None:
     """A note when this machine is busy enough to slow the run past its estimate (None when
-    quiet): the one-minute load average ``load`` (default: the machine's) above the cores the run
-    leaves free by more than half a core. The estimate is for a quiet machine; on the 2-core
-    machine of 28 Nov 2026 a one-rank run beside other runs took 8-15 % more CPU time on LIGGGHTS
-    and LAMMPS and 12-36 % more on YADE, and two MPI ranks beside three other runs took 5-11x the
-    wall time (docs/validation.md, "This machine's speed")."""
-    if load is None:
-        try:
-            load = os.getloadavg()[0]
-        except OSError:                      # pragma: no cover - no load average on this platform
+    quiet): ``busy`` cores in use by other processes (default: :func:`busy_cores`, measured now)
+    above the cores the run leaves free by more than half a core. The estimate is for a quiet
+    machine; on the 2-core machine of 28 Nov 2026 a one-rank run beside other runs took 8-15 % more
+    CPU time on LIGGGHTS and LAMMPS and 12-36 % more on YADE (twice as much beside another YADE
+    run), and two MPI ranks beside three other runs took 5-11x the wall time (docs/validation.md,
+    "This machine's speed")."""
+    if busy is None:
+        busy = busy_cores()
+        if busy is None:
             return None
     cores = cores or os.cpu_count() or 1
-    if load <= cores - workers + 0.5:
+    if busy <= cores - workers + 0.5:
         return None
-    return (f"note: this machine is busy (load {load:.1f} on {cores} cores, the run adds {workers}): the estimate is "
-            f"for a quiet machine, and sharing the cores makes the run slower (one rank: 8-36 % more CPU time "
-            f"measured here; several ranks: several times the wall time)")
+    return (f"note: this machine is busy ({busy:.1f} of its {cores} cores in use, the run adds {workers}): the "
+            f"estimate is for a quiet machine, and sharing the cores makes the run slower (one rank: 8-36 % more "
+            f"CPU time measured here, twice as much for two YADE runs; several ranks: several times the wall time)")
 
 
 def check_fits(case, size: dict, force: bool = False) -> list[str]:

@@ -3,12 +3,13 @@ summary.json/params.json files of complete runs."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
 
 from orchestrator.clock import RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, refresh
-from orchestrator.sizing import busy_note
+from orchestrator.sizing import busy_cores, busy_note
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -281,12 +282,15 @@ def test_this_machines_speed_is_interpolated_in_size_not_carried_across_sizes(tm
 
 
 def test_a_busy_machine_is_said_and_a_quiet_one_is_not():
-    # 2 cores: a one-rank run leaves one core free, so a load above 1.5 shares it
-    assert busy_note(1, load=1.4, cores=2) is None
-    note = busy_note(1, load=2.7, cores=2)
-    assert note and "load 2.7 on 2 cores" in note and "quiet machine" in note
-    # a two-rank run needs both cores: any load above half a core shares them
-    assert busy_note(2, load=0.4, cores=2) is None and busy_note(2, load=0.9, cores=2)
+    # 2 cores: a one-rank run leaves one core free, so more than 1.5 cores in use shares it
+    assert busy_note(1, busy=1.4, cores=2) is None
+    note = busy_note(1, busy=1.7, cores=2)
+    assert note and "1.7 of its 2 cores in use" in note and "quiet machine" in note
+    # a two-rank run needs both cores: more than half a core in use shares them
+    assert busy_note(2, busy=0.4, cores=2) is None and busy_note(2, busy=0.9, cores=2)
+    # the machine's own figure: between none and every core
+    b = busy_cores(0.05)
+    assert b is None or -0.01 <= b <= os.cpu_count() + 0.01
 
 
 def test_a_one_rank_run_counts_its_cpu_time_and_a_multi_rank_run_its_wall_time():
