@@ -143,3 +143,16 @@ def test_particles_larger_than_their_container_are_refused(tmp_path):
         load_case(case)
     msg = str(exc.value)
     assert str(case) in msg and "scene" in msg and "particles larger than their container" in msg
+
+
+def test_a_shear_cell_too_narrow_for_its_vanes_is_refused_with_the_width_that_fits(tmp_path):
+    """The medium case at size_scale 0.5 (0.36 mm, the seed's 0.1 mm gap) left the pistons no
+    room for the vanes; it validated and then failed while meshing the pistons."""
+    from pathlib import Path
+    medium = Path(__file__).parents[1] / "cases" / "shear_cell_medium.yaml"
+    case = tmp_path / "narrow.yaml"
+    case.write_text(f"extends: {medium}\nscene: {{cell_diameter: 0.36 mm}}\n")
+    with pytest.raises(CaseError) as exc:
+        load_case(case)
+    msg = str(exc.value)
+    assert str(case) in msg and "scene.cell_diameter" in msg and "widen the cell to more than 0.38 mm" in msg

@@ -176,6 +176,13 @@ def geometry_numbers(case) -> dict:
     Rp = R - s.gap
     t = s.vane_thickness
     r_in = s.vane_inner_radius if s.vane_inner_radius is not None else 3 * t
+    if Rp <= r_in or Rp <= t / 2:
+        raise DerivationError(
+            f"scene.cell_diameter: {s.cell_diameter * 1e3:.3g} mm less twice the gap ({s.gap * 1e3:.3g} mm) leaves a "
+            f"piston radius of {Rp * 1e3:.3g} mm, not more than where the vanes start ({r_in * 1e3:.3g} mm"
+            + (")" if s.vane_inner_radius is not None else ", 3 vane thicknesses)")
+            + f": no room for the vanes; widen the cell to more than {2 * (max(r_in, t / 2) + s.gap) * 1e3:.3g} mm, "
+            "or narrow the gap or the vanes")
     x_out = math.sqrt(Rp ** 2 - (t / 2) ** 2)
     vane_vol = 6 * t * (x_out - r_in) * s.vane_height
     v_mean = _mean_volume(s)
