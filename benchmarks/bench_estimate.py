@@ -79,7 +79,7 @@ def main(argv=None) -> int:
         loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
-        mf = speed_factor([(o.scene, o.n_particles, ratio_of[o.source]) for o in samples
+        mf = speed_factor([(o.scene, o.n_particles, ratio_of[o.source], o.quiet) for o in samples
                            if o.engine == s.engine and o.source != s.source], s.scene, s.n_particles)
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
         r3 = mf[0] * pk / s.engine_s if mf and pk == pk else math.nan

@@ -126,6 +126,14 @@ class RunSample:
         return self.ranks > 1 and self.load is not None and bool(self.cores) and self.load > self.cores + 0.5
 
     @property
+    def quiet(self) -> bool:
+        """Nothing else ran beside it: its mean load at most its own ranks and half a core (True
+        when the load was not recorded). A one-rank run's CPU time beside another run is longer too,
+        by 8-36 %, and by 2x for two YADE runs side by side (docs/validation.md), so the machine's
+        speed prefers quiet runs (:func:`speed_factor`)."""
+        return self.load is None or self.load <= self.ranks + 0.5
+
+    @property
     def units(self) -> float | None:
         """Units (StepPlan) this run took [-]; None without a plan, or when the run did not follow it
         (e.g. a triaxial whose stage 1 ran out of chunks and skipped the drag ramp)."""
@@ -234,7 +242,8 @@ def record_speed(run_dir) -> float | None:
     rows = table.setdefault(machine_id(), {}).setdefault(smp.engine, [])
     rows[:] = [r for r in rows if r.get("run") != str(run_dir)] + [{"run": str(run_dir), "scene": smp.scene,
                                                                       "n": int(smp.n_particles),
-                                                                      "ratio": round(ratio, 4)}]
+                                                                      "ratio": round(ratio, 4),
+                                                                      "quiet": smp.quiet}]
     rows[:] = _keep_recent(rows)
     out = speed_table_path()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -313,14 +322,36 @@ def speed_at_size(ns, ratios, n: int | None, trend: tuple[float, float, float] |
     return value
 
 
+def _prefer_quiet(records: list) -> list:
+    """``records`` ``(scene, n, ratio[, quiet])`` without the runs that shared the machine where a
+    quiet run of the same scene and size group stands in for them (one YADE run beside another read
+    1.22 of the table where a quiet one would read about 0.6). Records without the flag count as
+    quiet."""
+    def quiet(r):
+        return len(r) < 4 or r[3] is None or bool(r[3])
+    keep = []
+    for scene in {r[0] for r in records}:
+        sub = [r for r in records if r[0] == scene]
+        ns = np.array([float(r[1] or 0) for r in sub])
+        group = np.full(len(sub), -1)
+        if (ns > 0).any():
+            group[ns > 0] = _size_groups(ns[ns > 0])
+        for g in set(group.tolist()):
+            members = [r for r, k in zip(sub, group) if k == g]
+            calm = [r for r in members if quiet(r)]
+            keep += calm or members
+    return keep
+
+
 def speed_factor(records, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
     """(speed ratio [-], records it rests on) for a run of ``scene`` with ``n_particles``, from
-    ``records`` of one engine, each ``(scene, particle count or None, ratio)``: those of ``scene``
+    ``records`` of one engine, each ``(scene, particle count or None, ratio[, quiet])`` (the runs
+    that shared the machine left out where a quiet run of the same size stands in): those of ``scene``
     where there are any, at ``n_particles`` (:func:`speed_at_size`, beyond their sizes with the
     engine's :func:`size_trend` from the other scenes); else all of them, their median (the ratio
     differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42). None without
     a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py`` apply."""
-    records = [r for r in records if r[2] is not None and r[2] > 0]
+    records = _prefer_quiet([r for r in records if r[2] is not None and r[2] > 0])
     same = [r for r in records if scene is not None and r[0] == scene]
     use = same or records
     if not use:
@@ -335,7 +366,7 @@ def machine_factor(engine: str, scene: str | None = None, n_particles: int | Non
     """(ratio of engine time to the package table's prediction, runs it rests on) of ``engine`` on
     this machine (:func:`record_speed`), by :func:`speed_factor`; None before a run has been recorded."""
     rows = _speed_table().get(machine_id(), {}).get(engine) or []
-    return speed_factor([(r.get("scene"), r.get("n"), r["ratio"]) for r in rows
+    return speed_factor([(r.get("scene"), r.get("n"), r["ratio"], r.get("quiet")) for r in rows
                          if isinstance(r.get("ratio"), (int, float))], scene, n_particles)
 
 

@@ -337,3 +337,12 @@ def test_a_scene_measured_at_one_size_borrows_the_engines_size_trend_within_what
     assert speed_factor(recs, "B", 100)[0] == pytest.approx(0.3 * (205 / 300) ** beta, rel=0.02)
     # an engine without a scene of two sizes: held, as before
     assert speed_factor([("B", 300, 0.3)], "B", 2000)[0] == pytest.approx(0.3)
+
+
+def test_a_quiet_run_stands_in_for_those_that_shared_the_machine():
+    from orchestrator.clock import speed_factor
+    # YADE, 2 000 grains: one run beside another YADE run (1.22 of the table), one quiet (0.6)
+    recs = [("triaxial", 2000, 1.22, False), ("triaxial", 2010, 0.6, True), ("triaxial", 300, 0.3, None)]
+    assert speed_factor(recs, "triaxial", 2000)[0] == pytest.approx(0.6, rel=0.01)
+    # without a quiet run of that size the shared one is all there is
+    assert speed_factor(recs[:1], "triaxial", 2000)[0] == pytest.approx(1.22)
