@@ -134,25 +134,17 @@ def test_every_shipped_case_validates():
         load_case(p)
 
 
-def test_particles_larger_than_their_container_are_refused(tmp_path):
+@pytest.mark.parametrize("base, scene, words", [
+    ("shear_cell_smoke.yaml", "{psd: {d_max: 5 mm}}", ["scene", "particles larger than their container"]),
+    # the medium case at size_scale 0.5 (0.36 mm, the seed's 0.1 mm gap) left the pistons no room for
+    # the vanes; it validated and then failed while meshing the pistons
+    ("shear_cell_medium.yaml", "{cell_diameter: 0.36 mm}", ["scene.cell_diameter", "widen the cell to more than 0.38 mm"]),
+])
+def test_a_container_too_small_for_its_contents_is_refused(tmp_path, base, scene, words):
     from pathlib import Path
-    smoke = Path(__file__).parents[1] / "cases" / "shear_cell_smoke.yaml"
-    case = tmp_path / "big.yaml"
-    case.write_text(f"extends: {smoke}\nscene: {{psd: {{d_max: 5 mm}}}}\n")
+    case = tmp_path / "small.yaml"
+    case.write_text(f"extends: {Path(__file__).parents[1] / 'cases' / base}\nscene: {scene}\n")
     with pytest.raises(CaseError) as exc:
         load_case(case)
     msg = str(exc.value)
-    assert str(case) in msg and "scene" in msg and "particles larger than their container" in msg
-
-
-def test_a_shear_cell_too_narrow_for_its_vanes_is_refused_with_the_width_that_fits(tmp_path):
-    """The medium case at size_scale 0.5 (0.36 mm, the seed's 0.1 mm gap) left the pistons no
-    room for the vanes; it validated and then failed while meshing the pistons."""
-    from pathlib import Path
-    medium = Path(__file__).parents[1] / "cases" / "shear_cell_medium.yaml"
-    case = tmp_path / "narrow.yaml"
-    case.write_text(f"extends: {medium}\nscene: {{cell_diameter: 0.36 mm}}\n")
-    with pytest.raises(CaseError) as exc:
-        load_case(case)
-    msg = str(exc.value)
-    assert str(case) in msg and "scene.cell_diameter" in msg and "widen the cell to more than 0.38 mm" in msg
+    assert str(case) in msg and all(w in msg for w in words)
