@@ -222,7 +222,8 @@ def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:
     if smp is None or smp.shared or smp.engine_s <= 0:
         return None
     package = _as_throughputs(_package_table()) if package is None else package
-    tp = package.get(smp.engine, {}).get(smp.scene)
+    entries = package.get(smp.engine, {})
+    tp = entries.get(smp.scene) or entries.get(base_kind(smp.scene))
     if tp is None:
         return None
     predicted = tp.engine_time(smp.n_particles, smp.steps, smp.ranks)
@@ -353,6 +354,9 @@ def speed_factor(records, scene: str | None = None, n_particles: int | None = No
     a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py`` apply."""
     records = _prefer_quiet([r for r in records if r[2] is not None and r[2] > 0])
     same = [r for r in records if scene is not None and r[0] == scene]
+    if not same and scene is not None and base_kind(scene) != scene:      # a variant not measured yet
+        scene = base_kind(scene)
+        same = [r for r in records if r[0] == scene]
     use = same or records
     if not use:
         return None
@@ -391,6 +395,10 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         tp = scenes[scene]
         return (scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
                 f"measured on {tp.runs} {engine} {scene} run(s){note}")
+    if base_kind(scene) in scenes:     # a variant not measured yet: the scene's own entry
+        tp = scenes[base_kind(scene)]
+        return (scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
+                f"no {scene} run measured on {engine}: the {base_kind(scene)} entry, {tp.runs} run(s){note}")
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
         return (scale * tp.engine_time(n_particles, steps, ranks),
@@ -435,13 +443,16 @@ def _sample(run_dir: Path) -> RunSample | None:
     # the scene's kind from the run's case (summary.json's "scene" is the scene's results for some
     # scenes, e.g. the triaxial's stage figures, and the kind's name for others)
     try:
-        kind = (yaml.safe_load((run_dir / "case.yaml").read_text()).get("scene") or {}).get("kind", "")
+        case = yaml.safe_load((run_dir / "case.yaml").read_text()) or {}
+        kind = (case.get("scene") or {}).get("kind", "")
+        substitutes = (case.get("contact") or {}).get("substitutes") or {}
     except (OSError, ValueError, AttributeError):
-        kind = ""
+        kind, substitutes = "", {}
     if not kind and isinstance(s.get("scene"), str):
         kind = s["scene"]
     ranks = max(int(s.get("workers") or 1), 1)
     plan = step_plan(kind, sc)
+    key = clock_key(kind, s["engine"], substitutes)
     engine_s = float(wt["engine"])
     # the engine's own loop time where its log gives one (0 or absent: not measured, e.g. YADE's)
     loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
@@ -455,12 +466,12 @@ def _sample(run_dir: Path) -> RunSample | None:
         cost = run_cost(attempts, steps, use_cpu=ranks == 1)
         if cost is None:
             return None
-        return RunSample(s["engine"], kind, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,
+        return RunSample(s["engine"], key, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,
                          load, cores)
     if engine_seconds(s) < engine_s:          # a one-rank run's CPU time (engine_seconds)
         engine_s = engine_seconds(s)
         loop = engine_s - startup if startup < engine_s else engine_s
-    return RunSample(s["engine"], kind, n, steps, ranks, engine_s, loop, str(run_dir), plan, load, cores)
+    return RunSample(s["engine"], key, n, steps, ranks, engine_s, loop, str(run_dir), plan, load, cores)
 
 
 def _machine_load(attempts: list) -> tuple[float | None, int | None]:
@@ -475,12 +486,31 @@ def _machine_load(attempts: list) -> tuple[float | None, int | None]:
     return sum(a["load"] * a["wall_s"] for a in rows) / wall, cores
 
 
+def clock_key(kind: str, engine: str, substitutes: dict | None = None) -> str:
+    """The throughput table's key for a run of scene ``kind`` on ``engine`` with the case's
+    ``contact.substitutes``: the kind, or ``kind:variant`` where the scene's deck on that engine
+    costs differently per step with a substitute (:meth:`~orchestrator.scenes.base.Scene.clock_variant`:
+    YADE's triaxial on the shell pressure runs 1.3-1.7 ms a step on 2 000 grains, on its PFacet
+    membrane 5.3 ms, docs/validation.md)."""
+    from .registry import get_scene
+    try:
+        variant = get_scene(kind).clock_variant(engine, dict(substitutes or {}))
+    except (LookupError, TypeError, ValueError):
+        variant = None
+    return f"{kind}:{variant}" if variant else kind
+
+
+def base_kind(key: str) -> str:
+    """The scene kind of a table key (:func:`clock_key`)."""
+    return key.split(":", 1)[0]
+
+
 def step_plan(kind: str, scene_params: dict):
     """The scene's :class:`~orchestrator.scenes.base.StepPlan` for these numbers, or None (fixed
     step count, unknown scene, numbers of an older version)."""
     from .registry import get_scene      # the scenes import the case models: not needed to read the table
     try:
-        return get_scene(kind).step_plan(scene_params)
+        return get_scene(base_kind(kind)).step_plan(scene_params)
     except (LookupError, TypeError, ValueError):     # an unknown kind (RegistryError), numbers without the keys
         return None
 

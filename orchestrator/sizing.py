@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import time
 
-from .clock import estimate_engine_time, expected_steps, load_table, step_plan
+from .clock import clock_key, estimate_engine_time, expected_steps, load_table, step_plan
 from .registry import get_engine
 
 #: the orchestrator's packing and particle table [bytes per particle]
@@ -80,7 +80,9 @@ def estimate(case, params: dict, engine: str) -> dict:
     table = load_table()
     t_engine, basis = engine_time_estimate(case, params, engine, table=table, machine_speed=True)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
-    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), table.get(engine, {}).get(case.scene.kind))
+    entries = table.get(engine, {})
+    key = clock_key(case.scene.kind, engine, case.contact.substitutes)
+    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), entries.get(key) or entries.get(case.scene.kind))
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,
@@ -210,7 +212,8 @@ def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict
     sc = params["scene"]
     n = integrated_particles(params)
     steps = step_budget(case.scene.kind, sc)
-    t, basis = estimate_engine_time(engine_name, case.scene.kind, max(n, 1), steps, eng.workers(case),
+    t, basis = estimate_engine_time(engine_name, clock_key(case.scene.kind, engine_name, case.contact.substitutes),
+                                    max(n, 1), steps, eng.workers(case),
                                     table=table, plan=step_plan(case.scene.kind, sc), machine_speed=machine_speed)
     if t == t:         # not NaN: a measured model
         return t, basis

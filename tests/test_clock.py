@@ -346,3 +346,19 @@ def test_a_quiet_run_stands_in_for_those_that_shared_the_machine():
     assert speed_factor(recs, "triaxial", 2000)[0] == pytest.approx(0.6, rel=0.01)
     # without a quiet run of that size the shared one is all there is
     assert speed_factor(recs[:1], "triaxial", 2000)[0] == pytest.approx(1.22)
+
+
+def test_yades_triaxial_on_the_shell_is_its_own_clock_entry():
+    from orchestrator.clock import base_kind, clock_key, speed_factor
+    shell = {"yade.membrane": "shell_pressure", "liggghts.membrane": "shell_pressure"}
+    assert clock_key("triaxial", "yade", shell) == "triaxial:shell_pressure"
+    assert clock_key("triaxial", "yade", {"liggghts.membrane": "shell_pressure"}) == "triaxial"   # PFacet
+    assert clock_key("triaxial", "liggghts", shell) == "triaxial:shell_pressure"
+    assert clock_key("shear_cell", "yade", shell) == "shear_cell"
+    assert base_kind("triaxial:shell_pressure") == "triaxial"
+    # the membrane costs 3x the shell a step (28 Nov 2026): each boundary's runs set its own factor,
+    # and a variant not yet measured falls back to its scene's runs
+    recs = [("triaxial", 2000, 1.1, True), ("triaxial:shell_pressure", 2000, 0.35, True)]
+    assert speed_factor(recs, "triaxial:shell_pressure", 2000)[0] == pytest.approx(0.35)
+    assert speed_factor(recs, "triaxial", 2000)[0] == pytest.approx(1.1)
+    assert speed_factor(recs[:1], "triaxial:shell_pressure", 2000)[0] == pytest.approx(1.1)

@@ -112,6 +112,8 @@ class Scene(ABC):
     observables : convergence observables (orchestrator.stability.observables) for this scene.
     count_field : the ``scene:`` field the convergence knob ``count`` sets (the grain count; None:
         the scene has none).
+    clock_terms : the optional terms whose substitute on an engine changes the cost of a step
+        (:meth:`clock_variant`).
     default_analyses : analysis specs a report runs when the case lists none.
     """
 
@@ -124,6 +126,7 @@ class Scene(ABC):
     wall_columns: ClassVar[tuple[str, ...]] = ()
     observables: ClassVar[tuple[str, ...]] = ()
     count_field: ClassVar[str | None] = "n_particles"
+    clock_terms: ClassVar[tuple[str, ...]] = ()
     default_analyses: ClassVar[tuple[str, ...]] = ()
 
     # -- validation ------------------------------------------------------------------------
@@ -180,6 +183,14 @@ class Scene(ABC):
         (:func:`orchestrator.stability.convergence.ladder`), as its observables measure another
         sample than the rung's."""
         return []
+
+    def clock_variant(self, engine: str, substitutes: dict) -> str | None:
+        """A name for the variant of this scene's deck on ``engine`` that the case's
+        ``contact.substitutes`` select, where they change the cost of a step (the run-time model
+        keys on it: :func:`orchestrator.clock.clock_key`): the engine's substitutes for the terms
+        of :attr:`clock_terms`, joined; None without one."""
+        picked = [substitutes.get(f"{engine}.{term}") for term in self.clock_terms]
+        return "+".join(p for p in picked if p) or None
 
     def step_plan(self, scene_params: Mapping) -> StepPlan | None:
         """The variable part of the run's step count (:class:`StepPlan`), from the scene's numbers
