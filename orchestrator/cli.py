@@ -35,11 +35,12 @@ def cmd_validate(args) -> int:
     con.print(f"  dt = {p['dt']:.4g} s = {p['dt_fraction']:.3g} × critical {p['dt_critical']:.4g} s "
               f"(Rayleigh {p['dt_rayleigh']:.4g} s, Hertz t_c/10 {p['dt_hertz']:.4g} s)")
     con.print(f"  features: {', '.join(p['features'])}")
-    from .sizing import busy_note, describe, estimate, problems
+    from .sizing import busy_cores, busy_note, describe, estimate, problems
+    busy_now = busy_cores()                     # sampled once: validate runs nothing
     for eng in case.engines:
         size = estimate(case, p, eng)
         con.print(f"  {eng}: {describe(size)}")
-        busy = busy_note(get_engine(eng).workers(case))
+        busy = busy_note(get_engine(eng).workers(case), busy_now) if busy_now is not None else None
         if busy:
             con.print(f"  [yellow]{busy}[/yellow]")
         for prob in problems(case, size):

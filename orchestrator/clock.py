@@ -68,7 +68,7 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
-           "speed_ratio"]
+           "speed_ratio", "clock_key", "base_kind", "table_entry"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -222,8 +222,7 @@ def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:
     if smp is None or smp.shared or smp.engine_s <= 0:
         return None
     package = _as_throughputs(_package_table()) if package is None else package
-    entries = package.get(smp.engine, {})
-    tp = entries.get(smp.scene) or entries.get(base_kind(smp.scene))
+    tp = table_entry(package.get(smp.engine, {}), smp.scene)
     if tp is None:
         return None
     predicted = tp.engine_time(smp.n_particles, smp.steps, smp.ranks)
@@ -255,12 +254,18 @@ def record_speed(run_dir) -> float | None:
 def _keep_recent(rows: list) -> list:
     """The last :data:`SPEED_KEEP` rows of each scene and size group (rows without a count: one
     group per scene), in their order."""
-    ns = np.array([float(r.get("n") or 0) for r in rows])
-    group = np.full(len(rows), -1)
-    if (ns > 0).any():
-        group[ns > 0] = _size_groups(ns[ns > 0])
+    group = _count_groups([r.get("n") for r in rows])
     keys = [(r.get("scene"), int(g)) for r, g in zip(rows, group)]
     return [r for i, r in enumerate(rows) if keys[i + 1:].count(keys[i]) < SPEED_KEEP]
+
+
+def _count_groups(counts) -> np.ndarray:
+    """Each record's size group (:func:`_size_groups`) from its particle count, -1 without one."""
+    ns = np.array([float(c or 0) for c in counts])
+    group = np.full(len(ns), -1)
+    if (ns > 0).any():
+        group[ns > 0] = _size_groups(ns[ns > 0])
+    return group
 
 
 def _group_medians(ns, ratios) -> tuple[np.ndarray, np.ndarray]:
@@ -333,10 +338,7 @@ def _prefer_quiet(records: list) -> list:
     keep = []
     for scene in {r[0] for r in records}:
         sub = [r for r in records if r[0] == scene]
-        ns = np.array([float(r[1] or 0) for r in sub])
-        group = np.full(len(sub), -1)
-        if (ns > 0).any():
-            group[ns > 0] = _size_groups(ns[ns > 0])
+        group = _count_groups([r[1] for r in sub])
         for g in set(group.tolist()):
             members = [r for r, k in zip(sub, group) if k == g]
             calm = [r for r in members if quiet(r)]
@@ -391,14 +393,11 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         if mf is not None and scene not in user.get(engine, {}):
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
     scenes = table.get(engine, {})
-    if scene in scenes:
-        tp = scenes[scene]
-        return (scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
-                f"measured on {tp.runs} {engine} {scene} run(s){note}")
-    if base_kind(scene) in scenes:     # a variant not measured yet: the scene's own entry
-        tp = scenes[base_kind(scene)]
-        return (scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks),
-                f"no {scene} run measured on {engine}: the {base_kind(scene)} entry, {tp.runs} run(s){note}")
+    tp = table_entry(scenes, scene)
+    if tp is not None:
+        basis = (f"measured on {tp.runs} {engine} {scene} run(s)" if scene in scenes else
+                 f"no {scene} run measured on {engine}: the {base_kind(scene)} entry, {tp.runs} run(s)")
+        return scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks), basis + note
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
         return (scale * tp.engine_time(n_particles, steps, ranks),
@@ -468,8 +467,9 @@ def _sample(run_dir: Path) -> RunSample | None:
             return None
         return RunSample(s["engine"], key, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,
                          load, cores)
-    if engine_seconds(s) < engine_s:          # a one-rank run's CPU time (engine_seconds)
-        engine_s = engine_seconds(s)
+    quiet_s = engine_seconds(s)
+    if quiet_s < engine_s:          # a one-rank run's CPU time (engine_seconds)
+        engine_s = quiet_s
         loop = engine_s - startup if startup < engine_s else engine_s
     return RunSample(s["engine"], key, n, steps, ranks, engine_s, loop, str(run_dir), plan, load, cores)
 
@@ -503,6 +503,12 @@ def clock_key(kind: str, engine: str, substitutes: dict | None = None) -> str:
 def base_kind(key: str) -> str:
     """The scene kind of a table key (:func:`clock_key`)."""
     return key.split(":", 1)[0]
+
+
+def table_entry(entries: dict, key: str):
+    """The entry of ``key`` among one engine's table ``entries``, or for a variant not measured
+    yet its scene's (:func:`base_kind`); None without either."""
+    return entries.get(key) or entries.get(base_kind(key))
 
 
 def step_plan(kind: str, scene_params: dict):

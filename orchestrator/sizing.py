@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import time
 
-from .clock import clock_key, estimate_engine_time, expected_steps, load_table, step_plan
+from .clock import clock_key, estimate_engine_time, expected_steps, load_table, step_plan, table_entry
 from .registry import get_engine
 
 #: the orchestrator's packing and particle table [bytes per particle]
@@ -80,9 +80,8 @@ def estimate(case, params: dict, engine: str) -> dict:
     table = load_table()
     t_engine, basis = engine_time_estimate(case, params, engine, table=table, machine_speed=True)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
-    entries = table.get(engine, {})
-    key = clock_key(case.scene.kind, engine, case.contact.substitutes)
-    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), entries.get(key) or entries.get(case.scene.kind))
+    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), table_entry(
+        table.get(engine, {}), clock_key(case.scene.kind, engine, case.contact.substitutes)))
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,
