@@ -353,15 +353,38 @@ def test_yade_volume_two_ways_second_packing(yade_seed2):
 
 
 def test_servo_gain_below_its_stability_limit():
-    """The stage-1 servo's gain defaults to 0.8 x its stability limit g_c = p d50² / (v_max n dt k);
-    a gain at or above g_c (the platen would overshoot at every update) is refused, naming the field."""
+    """The stage-1 servo's gain defaults to half the largest gain stable over the platen's stiffness and
+    damping range (servo_loop.stability_limit); a gain at or above it is refused, naming the field. The
+    integral's time constant is a tenth of a chunk."""
     from orchestrator.case import CaseError
     from orchestrator.derive import derive
+    from orchestrator.scenes import servo_loop
     iso = derive(load_case(SMOKE))["scene"]["iso"]
-    assert iso["gain"] == pytest.approx(0.8 * iso["gain_critical"])
-    assert 1.0 < iso["gain_critical"] < 50.0
+    assert iso["gain"] == pytest.approx(0.5 * iso["gain_limit"])
+    assert 0.1 < iso["gain_limit"] < 50.0
+    assert iso["gain_integral"] == pytest.approx(iso["gain"] / iso["integral_steps"])
+    assert iso["integral_steps"] == pytest.approx(0.1 * iso["chunk"], abs=1)
     with pytest.raises(CaseError, match="scene.isotropic.gain .* stability limit"):
-        load_case(SMOKE, overrides={"scene": {"isotropic": {"gain": 1.01 * iso["gain_critical"]}}})
+        load_case(SMOKE, overrides={"scene": {"isotropic": {"gain": 1.01 * iso["gain_limit"]}}})
+
+
+def test_servo_loop_chatters_where_the_4000_clump_sample_did():
+    """The loop model against the YADE 4 000-clump sample of session 18 (docs/triaxial.md, Servo): its
+    platen had K = 1.31x and C = 0.55x the estimates; at the old default g = 0.8 pA/(v_max dt K) the
+    loop is unstable by the dashpot's same-step feedback (even/odd chatter, as measured), at the new
+    default it is stable with margin, and so is the integral at a tenth of a 49 200-step chunk."""
+    from orchestrator.scenes import servo_loop as sl
+    p, d50, E, rho, zeta, dt, v = 3e5, 5.51e-4, 9.3306e10, 2650.0, 0.0300065, 6.99776e-9, 1.0687
+    k, c = sl.platen_stiffness(p, d50, E), sl.platen_damping(p, d50, E, rho, zeta)
+    alpha, beta = v * dt * k / (p * d50 ** 2), v * c / (p * d50 ** 2)
+    old = 0.8 / alpha
+    assert sl.spectral_radius(old * alpha * 1.31, old * beta * 0.55) > 1.0
+    g = sl.GAIN_MARGIN * sl.stability_limit(alpha, beta)
+    assert sl.spectral_radius(g * alpha * 1.31, g * beta * 0.55) < 0.9
+    assert sl.stable_everywhere(g, alpha, beta, integral_ratio=1 / 4920)
+    # with no dashpot the limit is the delayed spring's own: lambda^2 - lambda + a = 0 is stable for
+    # a < 1, at every corner (K up to 2x): g < 1/(2 alpha)
+    assert sl.stability_limit(alpha, 0.0) == pytest.approx(0.5 / alpha, rel=1e-6)
 
 
 def test_drag_ramp_is_the_rearrangement_time_under_the_drag():

@@ -48,8 +48,8 @@ def test_liggghts_resume_line_carries_the_last_chunk_volume(tmp_path):
     from engines.liggghts.triaxial import read_restart_states
     (tmp_path / "restart").mkdir()
     (tmp_path / "restart" / "state.txt").write_text(
-        "3840 1 1 1 -1 0.25 -0.001 0 0\n"                                   # without the creep test
-        "7680 1 2 1 -1 0.5 -0.002 0 0 2.81234567890123e-08\n")               # with it
+        "3840 1 1 1 -1 0.25 -0.001 0 0 0.5 0.01\n"                                   # without the creep test
+        "7680 1 2 1 -1 0.5 -0.002 0 0 0.75 0.01 2.81234567890123e-08\n")               # with it
     st = read_restart_states(tmp_path)
     assert "vprev" not in st[3840]["text"]
     assert st[7680]["text"]["vprev"] == "2.81234567890123e-08" and st[7680]["chunks"] == 2

@@ -35,15 +35,17 @@ def _engine_resume(rd):
 
 
 def test_newest_restart_with_a_state_line(tmp_path):
-    lines = ["100 1 0 1 -1 -1.5 -0.01 0 0\n", "# a comment\n",
-             "300 2 0 0 -1 -3.25000000000001 -0.5 0.0066 200\n", "400 2 0 0 -1 -3.5"]    # 400: cut by the kill
+    lines = ["100 1 0 1 -1 -1.5 -0.01 0 0 0.5 0.01\n", "# a comment\n",
+             "300 2 0 0 -1 -3.25000000000001 -0.5 0.0066 200 2.75 0\n", "400 2 0 0 -1 -3.5"]    # 400: cut by the kill
     rd = _run_dir(tmp_path, [100, 300, 400], lines, [50, 100, 150, 300, 350, 400])
     states = read_restart_states(rd)
     assert sorted(states) == [100, 300]
     assert states[300] == {"step": 300, "stage": 2, "chunks": 0, "dragon": 0, "ramp_start": -1,
                            "ztot": -3.25000000000001, "vlast": -0.5, "H0": 0.0066, "shear_start": 200,
+                           "esum": 2.75, "elast": 0.0,
                            # as LIGGGHTS printed them: the resumed deck sets them from this text
-                           "text": {"ztot": "-3.25000000000001", "vlast": "-0.5", "H0": "0.0066"}}
+                           "text": {"ztot": "-3.25000000000001", "vlast": "-0.5", "H0": "0.0066",
+                                    "esum": "2.75", "elast": "0"}}
     r = resume_point("liggghts", rd, _engine_resume(rd))
     assert r["restart_file"] == "restart/state.300.restart" and r["step"] == 300
     assert r["scene_state"]["stage"] == 2 and r["candidates"] == ["restart/state.300.restart",

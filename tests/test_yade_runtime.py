@@ -93,16 +93,22 @@ def test_drag_ramp_falls_linearly_to_zero():
 
 
 def test_servo_pid_settings_reproduce_the_servo_law():
-    """YADE's ServoPIDController (v = clip(kP (|F| - target), v_max) along +z) with the derived
-    settings is the stage-1 law v = -v_max clip(g (1 - F/(p A)), -1, 1)."""
-    p, area, gain, v_max = 3e5, 1.1e-4, 0.7, 0.02
+    """YADE's ServoPIDController (v = clip(kP (|F| - target) + iTerm, v_max) along +z, iTerm += kI (|F| -
+    target) per update) with the derived settings is the stage-1 law v = -v_max clip(g e + g_i S, -1, 1),
+    e = 1 - F/(p A), S the sum of e."""
+    p, area, gain, gi, v_max = 3e5, 1.1e-4, 0.7, 0.01, 0.02
     for p_now in (p, 0.3 * p):
-        target, kP = control.servo_pid_settings(p_now, area, gain, v_max, p)
+        target, kP, kI = control.servo_pid_settings(p_now, area, gain, v_max, p, gi)
         for F in np.linspace(0, 3 * p_now * area, 13):
             v_pid = max(-v_max, min(v_max, kP * (abs(F) - target)))
             assert v_pid == pytest.approx(control.servo_velocity(1 - F / (p_now * area), gain, v_max), abs=1e-15)
-    target, kP = control.servo_pid_settings(0.0, area, gain, v_max, p)      # ramp start: error 1
-    assert max(-v_max, min(v_max, kP * (0.0 - target))) == pytest.approx(-v_max * gain)
+        # the integral: five updates at the same error sum to 5 e
+        F = 0.9 * p_now * area
+        i_term = sum(kI * (F - target) for _ in range(5))
+        assert i_term == pytest.approx(-v_max * gi * 5 * control.force_error(F, target))
+    target, kP, kI = control.servo_pid_settings(0.0, area, gain, v_max, p)      # ramp start: error 1
+    assert max(-v_max, min(v_max, kP * (0.0 - target))) == pytest.approx(-v_max * gain) and kI == 0.0
+    assert control.force_error(0.0, 0.0) == 1.0
 
 
 def test_membrane_correction_raises_the_pressure_when_the_grains_feel_less_and_stays_bounded():

@@ -93,14 +93,16 @@ def check_inserted_clumps(run_dir, params) -> None:
 #: columns of LIGGGHTS' restart/state.txt, one line per restart file (templates/liggghts/triaxial.in.j2):
 #: step, stage (1, 2), stage-1 chunks tested, grains' drag on (1/0), step the drag's ramp began (-1:
 #: none), sum of the top platen's speed samples [m/s] over steps 0..step and the one of the step,
-#: sample height H0 [m] and step when loading began (0 before)
-RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ramp_start", "ztot", "vlast", "H0", "shear_start")
+#: sample height H0 [m], step when loading began (0 before), and the sum of the stage-1 servo's windowed
+#: force error over steps 0..step with the one of the step (its integral term)
+RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ramp_start", "ztot", "vlast", "H0", "shear_start",
+                         "esum", "elast")
 #: the column a deck with the creep test (scene.isotropic.creep_tolerance) adds: the last chunk-mean
 #: boundary volume [m^3], as printed (text, like TEXT_COLUMNS)
 CREEP_COLUMN = "vprev"
 #: the columns a resumed deck sets from their text as LIGGGHTS printed it (15 digits): the deck it
 #: resumes gave them the same text (``variable ZS equal ${ztend}``), so both runs hold the same double
-TEXT_COLUMNS = ("ztot", "vlast", "H0")
+TEXT_COLUMNS = ("ztot", "vlast", "H0", "esum", "elast")
 
 
 def read_restart_states(run_dir: Path) -> dict[int, dict]:

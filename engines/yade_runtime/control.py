@@ -11,13 +11,20 @@ def servo_velocity(error: float, gain: float, v_max: float) -> float:
     return -v_max * max(-1.0, min(1.0, gain * error))
 
 
-def servo_pid_settings(p_now: float, area: float, gain: float, v_max: float, p: float):
-    """``(target [N], kP [m/s/N])`` for YADE's ServoPIDController on the top platen (axis +z) so that
-    its law ``v = clip(kP (|F| - target), v_max)`` is :func:`servo_velocity` with
-    ``error = 1 - F/(p_now area)``: target = p_now A, kP = v_max gain / (p_now A). ``p_now`` is
-    floored at 1e-9 p (the ramp starts at zero, where the Python law took error = 1)."""
+def servo_pid_settings(p_now: float, area: float, gain: float, v_max: float, p: float, gain_integral: float = 0.0):
+    """``(target [N], kP [m/s/N], kI [m/s/N])`` for YADE's ServoPIDController on the top platen (axis +z) so
+    that its law ``v = clip(kP (|F| - target) + iTerm, v_max)``, ``iTerm += kI (|F| - target)`` at each
+    update, is v = -v_max clip(g e + g_i S) with ``e = 1 - F/(p_now area)`` and S the sum of e:
+    target = p_now A, kP = v_max gain / (p_now A), kI = v_max gain_integral / (p_now A) (``gain_integral``
+    per update). ``p_now`` is floored at 1e-9 p (the ramp starts at zero, where the Python law took
+    error = 1)."""
     pa = max(p_now, 1e-9 * p) * area
-    return pa, v_max * gain / pa
+    return pa, v_max * gain / pa, v_max * gain_integral / pa
+
+
+def force_error(force: float, target: float) -> float:
+    """The servo's relative error e = 1 - F/target [-] (1 when the target is zero)."""
+    return 1.0 - force / target if target > 0 else 1.0
 
 
 def ramp(it: int, ramp_steps: int) -> float:

@@ -73,7 +73,9 @@ class Recorder:
 
     def _grab_contacts(self):
         """Grain-grain contacts: ids, point, unit normal from i to j, normal and tangential force on
-        i (both laws apply -(normalForce + shearForce) to id1)."""
+        i (both laws apply -(normalForce + shearForce) to id1). A pair that carries no normal force is left
+        out: YADE keeps a separated pair real (zero force) until the collider erases it, LIGGGHTS'
+        pair/gran/local lists touching pairs only (an adhesive pair pulled apart still carries a force: kept)."""
         b = self.buf
         pid = getattr(self, "_pid", None)
         if pid is None:
@@ -83,6 +85,8 @@ class Recorder:
             if not I.isReal or I.id1 not in pid or I.id2 not in pid:
                 continue
             g, ph = I.geom, I.phys
+            if ph.normalForce.squaredNorm() == 0:
+                continue
             rows.append((pid[I.id1], pid[I.id2]) + tuple(g.contactPoint) + tuple(g.normal)
                         + tuple(-ph.normalForce) + tuple(-ph.shearForce))
         a = np.asarray(rows, dtype=float).reshape(-1, 14)

@@ -95,15 +95,20 @@ class Controller:
         return next(e for e in O.engines if e.label == "servo")
 
     def update_servo(self):
-        """Stage 1: the servo's target force and gain from the ramped pressure and the current
-        cross-section (:func:`.control.servo_pid_settings`): v = -v_max clip(g (1 - sigma_top/p), -1, 1)
-        with sigma_top = F_top / A, run in C++ every ``servo_every`` steps."""
+        """Stage 1: the servo's target force and gains from the ramped pressure and the current
+        cross-section (:func:`.control.servo_pid_settings`): v = -v_max clip(g e + g_i S, -1, 1) with
+        e = 1 - F_top/(p A) and S the sum of e (ServoPIDController's iTerm), run in C++ every
+        ``servo_every`` steps. The sum takes only errors below ``integral_window`` (conditional
+        integration, decided here at each refresh: kI = 0 while |e| is larger)."""
         if self.stage != 1:
             return
         c = self.cfg
         s = self.servo_engine()
-        s.target, s.kP = law.servo_pid_settings(c["pressure"] * law.ramp(O.iter, c["ramp_steps"]), self.area,
-                                                c["gain"], c["v_max"], c["pressure"])
+        p_now = c["pressure"] * law.ramp(O.iter, c["ramp_steps"])
+        s.target, s.kP, s.kI = law.servo_pid_settings(p_now, self.area, c["gain"], c["v_max"], c["pressure"],
+                                                      c["gain_integral"] * c["servo_every"])
+        if abs(law.force_error(O.forces.f(self.top)[2], s.target)) >= c["integral_window"]:
+            s.kI = 0.0
 
     # -- stage switches -------------------------------------------------------------------------
     def grain_drag_on(self):

@@ -65,7 +65,7 @@ from ..params import Params, ScenePart, StabilityInputs, opt
 from ..psd import Cylinder, lognormal_mu_for_mean, relax_overlaps, truncated_lognormal
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
-from . import base
+from . import base, servo_loop
 
 
 # scipy.spatial is imported on first use (scipy.optimize: in orchestrator.psd): every case load
@@ -160,8 +160,8 @@ class Isotropic(Strict):
     inertial_number: float = Field(1e-3, gt=0, le=0.1,
                                    description="sets the servo's largest platen speed v_max = I/(d√(ρ/p))·H")
     gain: float | None = Field(None, gt=0, description="servo gain g in v = -v_max clip(g(1-σ_top/p), -1, 1); None: "
-                                                       "0.8 x the servo's stability limit g_c (derive(): above g_c "
-                                                       "the platen overshoots every update, the sample is hammered)")
+                                                       "half the servo's stability limit (derive(): above it the platen "
+                                                       "chatters or diverges, the sample is hammered)")
     ramp_steps: int | None = Field(None, ge=0, description="steps over which p is ramped up (None: derived)")
     tolerance: float = Field(0.01, gt=0, lt=0.5, description="|σ/p - 1| to end the stage (chunk averages)")
     max_chunks: int = Field(60, ge=1)
@@ -579,7 +579,7 @@ class TriaxialParams(ScenePart):
     strain_rate: float        #: loading strain rate [1/s]
     inertial_number: float    #: loading inertial number [-]
     shear_steps: int          #: steps of the loading stage [-]
-    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_critical [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s], drag_ramp_steps (linear ramp of the drag to zero, whole chunks; 0: off at once), drag_ramp_time [s], creep_tolerance (only when asked: largest relative change of the chunk-mean boundary volume for the drag stage to end) [-]
+    iso: dict                 #: stage-1 servo: chunk [steps], max_chunks, tolerance [-], v_max [m/s], gain, gain_limit [-], gain_integral [1/step], integral_steps, integral_window (|e| summed only below it) [-], ramp_steps, strain_rate_max [1/s], drag_viscosity [Pa s], drag_free_end, friction [-], drag_coefficient [Pa s], drag_ramp_steps (linear ramp of the drag to zero, whole chunks; 0: off at once), drag_ramp_time [s], creep_tolerance (only when asked: largest relative change of the chunk-mean boundary volume for the drag stage to end) [-]
     dump_every: int           #: steps between frames [-]
     series_every: int         #: steps between series rows [-]
     steps: int                #: steps of both stages [-]
@@ -656,23 +656,30 @@ def derive(case, common: Params) -> TriaxialParams:
     # stable at dt (m >= k (dt/0.2)^2)
     a_node = math.pi * D * H / (n_theta * n_z)
     m_node = max(m.density * m.thickness * a_node, 2.0 * k_contact * (dt / 0.2) ** 2)
-    total_iso = iso_chunk * s.isotropic.max_chunks
-    # --- stage-1 servo gain: the discrete loop v_n = -v_max g (1 - F_n/(pA)), F_{n+1} = F_n - K v_n n_s dt
-    # multiplies the force error by (1 - g/g_c) per update, g_c = pA / (v_max n_s dt K); the platen's
-    # stiffness K ~ (A/d50^2) k_hertz (one d50 grain per d50^2 of platen, each at F = p d50^2), so
-    # g_c = p d50^2 / (v_max n_s dt k_hertz). Above g_c the platen overshoots at every update (an
-    # even/odd-step oscillation that hammers the sample: seen on LIGGGHTS clumps at g = 5); above
-    # 2 g_c it diverges up to the speed clip. Default: g = 0.8 g_c (error x 0.2 per update; still no
-    # overshoot if K is up to 1.25x the estimate). A creeping sample needs a steady error
-    # e = v_creep / (v_max g): at g_c/2 the LIGGGHTS small case took 31 chunks to converge, 3x longer.
+    # stage 1 at most: the chunks the pressure ramp spans, then max_chunks tested ones (step_plan)
+    total_iso = iso_chunk * (s.isotropic.max_chunks + -(-max(1, ramp) // iso_chunk))
+    # --- stage-1 servo: v = -v_max clip(g e + g_i S, -1, 1) on the relative force error e = 1 - F/(pA) and
+    # its sum S (orchestrator/scenes/servo_loop.py, docs/triaxial.md "Servo"). The platen's contacts
+    # act as a spring K ~ (A/d50^2) k_hertz and a dashpot C ~ (A/d50^2) c (one d50 grain per d50^2 of
+    # platen at F = p d50^2); the dashpot answers a speed change in the same step, and above
+    # b = g v_max C/(pA) = 1 + a/2 the error flips sign every update (the even/odd chatter the 4 000-clump
+    # YADE sample showed at the old default g = 0.8 pA/(v_max n dt K)). Default g: half the largest gain
+    # stable over K in [0.5, 2] and C in [0.3, 1.5] x the estimates. The integral (time constant a tenth
+    # of a chunk) removes the steady error of a creeping sample, e = v_creep/(v_max g), that a
+    # proportional law leaves: a sample that compacts at the platen's pace otherwise reads sigma1 < p.
     servo_every = int(max(1, min(series_every, 0.1 * delta / (v_iso * dt))))
-    gain_critical = p * d50 ** 2 / (v_iso * servo_every * dt * k_hertz)
-    gain = s.isotropic.gain if s.isotropic.gain is not None else 0.8 * gain_critical
-    if gain >= gain_critical:
+    c_platen = servo_loop.platen_damping(p, d50, E_pw, rho, common.restitution.damping_ratio or 0.0)
+    servo_alpha = v_iso * servo_every * dt * k_hertz / (p * d50 ** 2)
+    servo_beta = v_iso * c_platen / (p * d50 ** 2)
+    gain_limit = servo_loop.stability_limit(servo_alpha, servo_beta)
+    gain = s.isotropic.gain if s.isotropic.gain is not None else servo_loop.GAIN_MARGIN * gain_limit
+    if gain >= gain_limit:
         raise DerivationError(f"scene.isotropic.gain = {gain:.3g} is at or above the servo's stability limit "
-                              f"g_c = {gain_critical:.3g} (p d50^2 / (v_max n dt k), docs/triaxial.md): the platen "
-                              f"would overshoot at every update; use a gain below {gain_critical:.3g} or leave it "
-                              "out (default 0.8 g_c)")
+                              f"{gain_limit:.3g} (the platen's contact stiffness and damping, docs/triaxial.md "
+                              f"\"Servo\"): the platen would chatter or diverge; use a gain below {gain_limit:.3g} "
+                              f"or leave it out (default {servo_loop.GAIN_MARGIN:g} x the limit)")
+    integral_steps = max(servo_every, int(round(servo_loop.INTEGRAL_FRACTION_OF_CHUNK * iso_chunk)))
+    gain_integral = gain / integral_steps          # per step of error summed
     # stage-1 drag (same law in both engines): terminal speed v_t = I_iso sqrt(p/rho) for F = p d50^2
     v_t = s.isotropic.drag_inertial_number * math.sqrt(p / rho)
     nu = p * d50 / (3 * math.pi * v_t) if s.isotropic.drag else 0.0
@@ -703,7 +710,8 @@ def derive(case, common: Params) -> TriaxialParams:
         "diameter": D, "height": H, "d50": d50, "pressure": p, "axial_strain": s.axial_strain,
         "strain_rate": rate, "inertial_number": s.inertial_number, "shear_steps": shear_steps,
         "iso": {"chunk": iso_chunk, "max_chunks": s.isotropic.max_chunks, "tolerance": s.isotropic.tolerance,
-                "v_max": v_iso, "gain": gain, "gain_critical": gain_critical, "ramp_steps": max(1, ramp),
+                "v_max": v_iso, "gain": gain, "gain_limit": gain_limit, "gain_integral": gain_integral,
+                "integral_steps": integral_steps, "integral_window": servo_loop.INTEGRAL_WINDOW, "ramp_steps": max(1, ramp),
                 "strain_rate_max": rate_iso, "drag_viscosity": nu,
                 "drag_free_end": bool(s.isotropic.drag_free_end and nu > 0),
                 # preparation friction (stage 1), restored to contact.friction for loading
