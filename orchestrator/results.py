@@ -259,8 +259,8 @@ def print_key_results(run_dir, console) -> None:
         t.add_column(col)
     for r in rows:
         val = r.text()
-        if r.ok is False:
-            val = f"[red]{val}[/red]"
+        if r.ok is False:          # in words too: a log file or a plain terminal shows no colour
+            val = f"[red]{val}  FAIL[/red]"
         t.add_row(r.quantity, val, r.seed)
     console.print(t)
     adir = run_dir / "analysis"

@@ -112,3 +112,18 @@ def test_shear_cell_results_say_whether_mu_macro_is_steady(tmp_path):
     drift = next(r for q, r in rows.items() if q.startswith("μ_macro: drift"))
     assert drift.ok is False and drift.text() == "0.093 ± 0.033"
     assert rows["μ_macro: standard error of the mean"].value == 0.02
+
+
+def test_a_failed_check_says_so_in_words(tmp_path, monkeypatch):
+    """The results table marks a failed check with FAIL, not only in red: a log file or a terminal
+    without colour (``run --quiet`` into a file) must show it too."""
+    import io
+    from rich.console import Console
+    import orchestrator.results as res
+    monkeypatch.setattr(res, "key_results", lambda d: [res.KeyResult("a check (≤ 1 %)", 1.4, "%", ok=False),
+                                                       res.KeyResult("a passed one", 0.5, "%", ok=True)])
+    buf = io.StringIO()
+    res.print_key_results(tmp_path, Console(file=buf, no_color=True, width=100))
+    lines = buf.getvalue().splitlines()
+    assert any("a check" in l and "FAIL" in l for l in lines)
+    assert not any("a passed one" in l and "FAIL" in l for l in lines)
