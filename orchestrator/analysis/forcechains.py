@@ -36,7 +36,8 @@ def force_chains(position, stress, i, j, max_angle_deg: float = 45.0, factor: fl
     ev[finite], evec[finite] = np.linalg.eigh(s[finite])
     comp = -ev[:, 0]                         # most compressive principal value (tension positive)
     d = evec[:, :, 0]
-    mean = np.nanmean(np.where(comp > 0, comp, np.nan))
+    loaded = comp > 0                        # NaN (non-finite stress) compares False
+    mean = comp[loaded].mean() if loaded.any() else np.inf    # no loaded grain: no chain
     high = finite & (comp > factor * mean)
     b = p[j] - p[i]
     b /= np.linalg.norm(b, axis=1)[:, None]

@@ -30,25 +30,47 @@ def _label(g, col="control1"):
     return f"{g[col].iloc[0]:.4g}" if col in g else ""
 
 
-def _log_pdf(ax, x, label, bins=40):
+def _log_pdf(ax, x, label, bins=40, color=None, floor_quantile=0.01):
+    """Log-binned PDF of the positive finite values of ``x``, from their ``floor_quantile`` quantile
+    up: below it lie the round-off values of grains that moved affinely (D²min ~ 1e-30), which
+    would stretch the axis over tens of decades."""
     x = np.asarray(x, float)
     x = x[np.isfinite(x) & (x > 0)]
-    if x.size < 2 or x.min() == x.max():
+    if x.size < 2:
         return
-    edges = np.geomspace(x.min(), x.max(), bins + 1)
+    lo = max(x.min(), float(np.quantile(x, floor_quantile)))
+    x = x[x >= lo]
+    if x.size < 2 or lo == x.max():
+        return
+    edges = np.geomspace(lo, x.max(), bins + 1)
     h, _ = np.histogram(x, edges, density=True)
     c = np.sqrt(edges[1:] * edges[:-1])
-    ax.loglog(c[h > 0], h[h > 0], "o-", ms=3, label=label)
+    ax.loglog(c[h > 0], h[h > 0], "o-", ms=3, label=label, color=color)
+
+
+#: frame pairs drawn in a PDF plot at most (evenly spaced over the run; the tables keep them all)
+MAX_CURVES = 8
+
+
+def _spread(items, n=MAX_CURVES):
+    """At most ``n`` of ``items``, evenly spaced, the first and the last kept."""
+    items = list(items)
+    if len(items) <= n:
+        return items
+    return [items[int(round(k))] for k in np.linspace(0, len(items) - 1, n)]
 
 
 def plot_d2min(res, **kw):
-    """PDFs of D²min/d50² and ε_q per frame pair (seed 001, Fig. 12)."""
+    """PDFs of D²min/d50² and ε_q per frame pair (seed 001, Fig. 12): at most :data:`MAX_CURVES`
+    pairs, evenly spaced, coloured from the first (dark) to the last."""
     t = res.tables["particles"]
     fig, (a1, a2) = _fig(2)
-    for (k0, k1), g in t.groupby(["frame0", "frame1"]):
+    pairs = _spread(t.groupby(["frame0", "frame1"]))
+    colors = matplotlib.colormaps["viridis"](np.linspace(0, 0.9, max(len(pairs), 1)))
+    for ((k0, k1), g), col in zip(pairs, colors):
         lab = f"{g['control0'].iloc[0]:.4g}→{g['control1'].iloc[0]:.4g}"
-        _log_pdf(a1, g["d2min_d50"], lab)
-        _log_pdf(a2, g["eps_q"], lab)
+        _log_pdf(a1, g["d2min_d50"], lab, color=col)
+        _log_pdf(a2, g["eps_q"], lab, color=col)
     a1.set_xlabel(r"$D^2_{min}/d_{50}^2$"); a1.set_ylabel("PDF")
     a2.set_xlabel(r"local deviatoric strain $\varepsilon_q$"); a2.set_ylabel("PDF")
     a1.legend(fontsize=7, title=res.scalars.get("control", ""))

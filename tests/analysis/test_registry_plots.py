@@ -61,3 +61,25 @@ def test_main_entry_point(shear_cell, tmp_path, capsys):
     from orchestrator.analysis.__main__ import main
     assert main([str(shear_cell.path), str(tmp_path), 'rdf:{"bins": 20}']) == 0
     assert (tmp_path / "rdf_rdf.csv").exists()
+
+
+def test_d2min_plot_stays_readable_over_many_frame_pairs():
+    """A long run has dozens of frame pairs: the plot draws at most plots.MAX_CURVES of them
+    (first and last kept), and the round-off D²min of affinely moving grains (~1e-31) does not
+    stretch the axis over tens of decades (the PDF starts at the 1 % quantile)."""
+    import pandas as pd
+    from orchestrator.analysis._common import Result
+    rng = np.random.default_rng(0)
+    rows = []
+    for k in range(30):
+        d2 = rng.lognormal(-6, 1, 400)
+        d2[:3] = 1e-31                                  # round-off values
+        rows.append(pd.DataFrame({"frame0": k, "frame1": k + 1, "control0": 0.01 * k, "control1": 0.01 * (k + 1),
+                                  "d2min_d50": d2, "eps_q": rng.lognormal(-3, 1, 400)}))
+    res = Result("d2min", tables={"particles": pd.concat(rows)}, scalars={"control": "axial_strain"})
+    fig = plots.plot_d2min(res)
+    a1 = fig.axes[0]
+    assert len(a1.get_lines()) == plots.MAX_CURVES
+    labels = [t.get_text() for t in a1.get_legend().get_texts()]
+    assert labels[0] == "0→0.01" and labels[-1] == "0.29→0.3"
+    assert a1.get_xlim()[0] > 1e-8
