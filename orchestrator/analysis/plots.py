@@ -122,7 +122,8 @@ def plot_clusters(res, **kw):
             a1.legend(fontsize=8)
     a1.set_xlabel("cluster size s"); a1.set_ylabel("P(s)")
     if len(ct):
-        m = ct["rg"] > 0
+        # a one-grain cluster has R_g = 0 (its round-off, ~1e-15 mm, would stretch the axis): s >= 2
+        m = (ct["rg"] > 0) & (ct["size"] >= 2)
         a2.loglog(ct.loc[m, "size"], ct.loc[m, "rg"] * MM, ".", ms=3, alpha=0.5)
         df = res.scalars.get("d_f")
         if df is not None and np.isfinite(df):
@@ -257,6 +258,8 @@ def plot_fabric(res, **kw):
             y = g["mean"] if q == "force" else g["density"]
             ax.plot(np.r_[g["psi"], g["psi"].iloc[0]], np.r_[y, y.iloc[0]], label=f"frame {k}")
         ax.set_title({"branch": "branch vectors", "normal": "contact normals", "force": "mean normal force [N]"}[q], fontsize=9)
+        ax.yaxis.set_major_locator(MaxNLocator(3))     # radial labels: a few, not one per grid circle
+        ax.tick_params(axis="y", labelsize=7)
     axes[0].legend(fontsize=7, loc="lower left")
     fig.suptitle(f"plane {res.scalars.get('plane', '')} (angle from the first axis)", fontsize=9)
     return fig
