@@ -408,6 +408,7 @@ def test_drag_ramp_is_the_rearrangement_time_under_the_drag():
     assert off["drag_ramp_steps"] == 0
 
 
+@pytest.mark.engine
 @pytest.mark.parametrize("eng", ENGINES)
 def test_servo_reaches_p_while_the_sample_creeps(runs, eng):
     """Stage 1 with the drag: the sample creeps (compacts at the drag's pace) and the top platen must
