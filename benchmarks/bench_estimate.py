@@ -33,7 +33,7 @@ from pathlib import Path
 
 from orchestrator.case import load_case
 
-from orchestrator.clock import (estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_factor,
+from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_factor,
                                 speed_ratio)
 from orchestrator.runner import run_case
 from orchestrator.scenes.triaxial import stage1_problems
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
                 worst_quiet = max(worst_quiet or 0.0, abs(r2 - 1))
         # a run that left its scene's step plan (a triaxial whose stage 1 ran out of chunks unconverged
         # and skipped the drag ramp): the estimate is for a run that follows it
-        off_plan = s.scene.startswith("triaxial") and bool(stage1_problems(Path(s.source)))
+        off_plan = base_kind(s.scene) == "triaxial" and bool(stage1_problems(Path(s.source)))
         if r3 == r3:
             machine_err["all"] = max(machine_err["all"] or 0.0, abs(r3 - 1))
             if not (s.shared or off_plan):

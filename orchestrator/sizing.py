@@ -54,14 +54,14 @@ def integrated_particles(params: dict) -> int:
     return int(sc.get("n_spheres") or sc.get("n") or len(sc.get("ids", [])))
 
 
-def step_budget(kind: str, sc: dict) -> int:
-    """Most steps a run of the scene ``kind`` with the derived scene numbers ``sc`` can take [-]: the
-    derived ``total_steps``, or where the scene decides its step count while it runs (triaxial stage
-    1), its step plan's maximum (:func:`orchestrator.clock.step_plan`), whichever is larger. The
-    triaxial's derived budget leaves out the pressure ramp's chunks, which its runs take besides the
-    tested ones (a 2 000-grain LIGGGHTS run: 334 400 steps against a budget of 311 600)."""
+def step_budget(sc: dict, plan) -> int:
+    """Most steps a run with the derived scene numbers ``sc`` can take [-]: the derived
+    ``total_steps``, or where the scene decides its step count while it runs (triaxial stage 1), the
+    maximum of its step ``plan`` (:func:`orchestrator.clock.step_plan`; None: none), whichever is larger (for the
+    triaxial they agree since session 18: its derived budget counts the pressure ramp's chunks too,
+    which a 2 000-grain LIGGGHTS run took besides the tested ones, 334 400 steps against the old
+    budget of 311 600)."""
     steps = int(sc.get("total_steps", sc["steps"]))
-    plan = step_plan(kind, sc)
     return max(steps, plan.steps(plan.max_units)) if plan is not None else steps
 
 
@@ -71,17 +71,16 @@ def estimate(case, params: dict, engine: str) -> dict:
     engine and the parse), ``disk_bytes`` (frames.h5), ``engine_time_s``."""
     sc = params["scene"]
     n = integrated_particles(params)
-    steps = step_budget(case.scene.kind, sc)
+    key, steps, plan = clock_inputs(case, sc, engine)
     frames = frame_count(params)
     o = case.output
     cols = 1 + 3 * (1 + o.velocity + o.angular_velocity + o.force + o.torque) + (7 if o.stress else 0)
     frames_bytes = frames * n * cols * 8
     eng = get_engine(engine)
     table = load_table()
-    t_engine, basis = engine_time_estimate(case, params, engine, table=table, machine_speed=True)
+    t_engine, basis = _engine_time(case, params, engine, key, steps, plan, table, machine_speed=True)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
-    steps_expected = expected_steps(steps, step_plan(case.scene.kind, sc), table_entry(
-        table.get(engine, {}), clock_key(case.scene.kind, engine, case.contact.substitutes)))
+    steps_expected = expected_steps(steps, plan, table_entry(table.get(engine, {}), key))
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,
@@ -207,13 +206,26 @@ def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict
     (a + b n) / S(workers) per engine and scene); an engine never measured falls back to the
     adapter's bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck
     runs (the basis says so). ``table``: the throughput table (default :func:`orchestrator.clock.load_table`)."""
+    key, steps, plan = clock_inputs(case, params["scene"], engine_name)
+    return _engine_time(case, params, engine_name, key, steps, plan, table, machine_speed)
+
+
+def clock_inputs(case: Case, sc: dict, engine_name: str) -> tuple:
+    """(throughput-table key, step budget, step plan or None) of a run of ``case`` on ``engine_name``
+    with the scene's numbers ``sc`` (:func:`orchestrator.clock.clock_key`, :func:`step_budget`,
+    :func:`orchestrator.clock.step_plan`)."""
+    kind = case.scene.kind
+    plan = step_plan(kind, sc)
+    return clock_key(kind, engine_name, case.contact.substitutes), step_budget(sc, plan), plan
+
+
+def _engine_time(case: Case, params: dict, engine_name: str, key: str, steps: int, plan, table: dict | None,
+                 machine_speed: bool | None) -> tuple[float, str]:
+    """:func:`engine_time_estimate` from the run's :func:`clock_inputs`."""
     eng = get_engine(engine_name)
-    sc = params["scene"]
     n = integrated_particles(params)
-    steps = step_budget(case.scene.kind, sc)
-    t, basis = estimate_engine_time(engine_name, clock_key(case.scene.kind, engine_name, case.contact.substitutes),
-                                    max(n, 1), steps, eng.workers(case),
-                                    table=table, plan=step_plan(case.scene.kind, sc), machine_speed=machine_speed)
+    t, basis = estimate_engine_time(engine_name, key, max(n, 1), steps, eng.workers(case),
+                                    table=table, plan=plan, machine_speed=machine_speed)
     if t == t:         # not NaN: a measured model
         return t, basis
     return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case)), BARE_BASIS

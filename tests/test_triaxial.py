@@ -370,7 +370,7 @@ def test_servo_gain_below_its_stability_limit():
 
 def test_servo_loop_chatters_where_the_4000_clump_sample_did():
     """The loop model against the YADE 4 000-clump sample of session 18 (docs/triaxial.md, Servo): its
-    platen had K = 1.31x and C = 0.55x the estimates; at the old default g = 0.8 pA/(v_max dt K) the
+    platen had K = 1.33x and C = 0.58x the estimates (benchmarks/servo_probe.py on its checkpoint); at the old default g = 0.8 pA/(v_max dt K) the
     loop is unstable by the dashpot's same-step feedback (even/odd chatter, as measured), at the new
     default it is stable with margin, and so is the integral at a tenth of a 49 200-step chunk."""
     from orchestrator.scenes import servo_loop as sl
@@ -378,9 +378,9 @@ def test_servo_loop_chatters_where_the_4000_clump_sample_did():
     k, c = sl.platen_stiffness(p, d50, E), sl.platen_damping(p, d50, E, rho, zeta)
     alpha, beta = v * dt * k / (p * d50 ** 2), v * c / (p * d50 ** 2)
     old = 0.8 / alpha
-    assert sl.spectral_radius(old * alpha * 1.31, old * beta * 0.55) > 1.0
+    assert sl.spectral_radius(old * alpha * 1.33, old * beta * 0.58) > 1.0
     g = sl.GAIN_MARGIN * sl.stability_limit(alpha, beta)
-    assert sl.spectral_radius(g * alpha * 1.31, g * beta * 0.55) < 0.9
+    assert sl.spectral_radius(g * alpha * 1.33, g * beta * 0.58) < 0.9
     assert sl.stable_everywhere(g, alpha, beta, integral_ratio=1 / 4920)
     # with no dashpot the limit is the delayed spring's own: lambda^2 - lambda + a = 0 is stable for
     # a < 1, at every corner (K up to 2x): g < 1/(2 alpha)

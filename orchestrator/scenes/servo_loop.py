@@ -17,7 +17,8 @@ With the spring alone (β = 0) the loop is stable for a < 1 (λ² - λ + a = 0: 
 halves the undelayed limit a < 2); the dashpot's same-step feedback makes the error flip sign every
 update (an even/odd oscillation) once b > 1 + a/2 (Jury's test). That
 oscillation is what the 4 000-clump YADE sample at the old default g = 0.8/α showed (docs/triaxial.md):
-there b = 1.6 and a = 1.05 (measured: K = 1.31x and C = 0.55x this module's estimates).
+there a = 1.06 and b = 1.66, from K = 1.33x and C = 0.58x this module's estimates as measured at the
+platen (``benchmarks/servo_probe.py``).
 
 The integral term removes the steady error a creeping sample leaves under a proportional law
 (e = v_creep / (v_max g)): a sample that compacts at the platen's pace otherwise reads σ1 < p for
@@ -31,8 +32,8 @@ import math
 import numpy as np
 
 #: corners of the (K, C) range the default gain must be stable over, as multiples of the estimates
-#: of :func:`platen_stiffness` and :func:`platen_damping`: measured 1.31 and 0.55 on the 4 000-clump
-#: sample (284 member contacts on the platen), sphere samples touch it with fewer grains
+#: of :func:`platen_stiffness` and :func:`platen_damping`: measured 1.33 and 0.58 on the 4 000-clump
+#: sample (289 member contacts on the platen, benchmarks/servo_probe.py), sphere samples touch it with fewer grains
 ENVELOPE = ((0.5, 0.3), (0.5, 1.5), (2.0, 0.3), (2.0, 1.5), (1.0, 1.0))
 #: the default gain is this fraction of the envelope's stability limit (a gain margin of 2)
 GAIN_MARGIN = 0.5
@@ -40,14 +41,20 @@ GAIN_MARGIN = 0.5
 INTEGRAL_FRACTION_OF_CHUNK = 0.1
 
 
-def platen_stiffness(p: float, d50: float, E_pw: float) -> float:
-    """Tangent Hertz stiffness [N/m] of one d50 grain on a flat wall carrying F = p d50²:
-    k = 2 E* sqrt(R δ), δ = (3F / (4 E* sqrt R))^(2/3) (Hertz; E* grain-wall). The platen carries
-    about one such grain per d50² of its area."""
+def wall_contact(p: float, d50: float, E_pw: float) -> tuple[float, float]:
+    """(overlap δ [m], tangent stiffness k [N/m]) of one d50 grain on a flat wall carrying
+    F = p d50² (Hertz): δ = (3F / (4 E* sqrt R))^(2/3), k = 2 E* sqrt(R δ), E* grain-wall. The
+    platen carries about one such grain per d50² of its area; the membrane's contact stiffness is
+    set from the same k (orchestrator.scenes.triaxial.derive)."""
     F = p * d50 ** 2
     R = d50 / 2
     delta = (3 * F / (4 * E_pw * math.sqrt(R))) ** (2 / 3)
-    return 2 * E_pw * math.sqrt(R * delta)
+    return delta, 2 * E_pw * math.sqrt(R * delta)
+
+
+def platen_stiffness(p: float, d50: float, E_pw: float) -> float:
+    """Tangent Hertz stiffness [N/m] of one d50 grain on the platen at F = p d50² (:func:`wall_contact`)."""
+    return wall_contact(p, d50, E_pw)[1]
 
 
 def platen_damping(p: float, d50: float, E_pw: float, rho: float, zeta: float) -> float:

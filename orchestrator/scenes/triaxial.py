@@ -632,11 +632,9 @@ def derive(case, common: Params) -> TriaxialParams:
     bands = s.lateral.bands or max(1, int(round(H / (3 * d50))))
     m = s.membrane
     E_pw = common.E_eff_pw
-    # Hertz tangent stiffness of a d50 grain on a flat wall carrying F = p d50^2
-    F = p * d50 ** 2
+    # Hertz overlap and tangent stiffness of a d50 grain on a flat wall carrying F = p d50^2
+    delta, k_hertz = servo_loop.wall_contact(p, d50, E_pw)
     R = d50 / 2
-    delta = (3 * F / (4 * E_pw * math.sqrt(R))) ** (2 / 3)
-    k_hertz = 2 * E_pw * math.sqrt(R * delta)
     k_contact = m.contact_stiffness * k_hertz
     r_node = m.node_radius * d50
     # Ip2_FrictMat_CpmMat_FrictPhys: kn = 2 E1 r1 E2 r2/(E1 r1 + E2 r2) with the grain (E, r) and
