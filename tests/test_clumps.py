@@ -13,6 +13,8 @@ import h5py
 import numpy as np
 import pytest
 
+from engines.lammps_dump import read_binary_dump
+from engines.liggghts.segments import dump_segments
 from orchestrator.case import load_case
 from orchestrator.clumps import (LibraryError, bounding_radius, equivalent_scale, load_library,
                                  mass_properties, place, random_quaternions)
@@ -199,8 +201,8 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
     axial strain): every clump inserted with its template's members, the members of every clump keep
     their distances in every frame, LIGGGHTS' body masses match the union integrated here on the
     members as they lie in the first frame, its rotational kinetic energy of the bodies
-    (compute erotate/multisphere) matches 1/2 w.I.w with the inertia integrated here, and no member
-    crosses a platen."""
+    (compute erotate/multisphere) matches 1/2 w.I.w with the inertia integrated here, the bodies' state
+    crosses the deck's segment boundaries (restart files) unchanged, and no member crosses a platen."""
     from orchestrator.runner import run_case
     if shutil.which("liggghts") is None:
         pytest.fail("liggghts is not installed; run `bash .ci/setup`")
@@ -265,6 +267,21 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
         w = omega[k][rows[0]]
         e_rot += 0.5 * w @ I @ w
     assert E[j, 2] > 0 and E[j, 2] == pytest.approx(e_rot, rel=0.01)
+    # the deck runs in segments (clear + read_restart, the templates and fix multisphere defined again):
+    # the frame of a segment's first step is written twice, at the end of the segment before and by the
+    # new one's set-up; the bodies' state came back from the restart file, so the members' positions,
+    # velocities and angular velocities (the body's, fix multisphere sets them) are the same doubles
+    cols = json.loads((rd / "dump" / "columns.json").read_text())
+    kin = [cols.index(c) for c in ("x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz")]
+    seen, twice = {}, 0
+    for seg in dump_segments(rd):
+        for st, a in read_binary_dump([seg], len(cols)):
+            a = a[np.argsort(a[:, cols.index("id")])][:, kin]
+            if st in seen:
+                np.testing.assert_array_equal(a, seen[st], err_msg=f"step {st}: {seg.name} differs")
+                twice += 1
+            seen[st] = a
+    assert twice >= 2, "fewer than two segment boundaries on frame steps"
     # no member crosses a platen (beyond a contact overlap) in any frame
     smallest = float(r.min())
     for kk, st in enumerate(steps):

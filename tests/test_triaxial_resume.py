@@ -195,13 +195,18 @@ def _chunk_tests(run_dir: Path) -> dict[int, str]:
 
 #: the smoke case with the drag stage's volume-creep test: its last chunk-mean volume is resume state
 CREEP = REPO / "tests" / "data" / "triaxial_smoke_creep.yaml"
+#: the smoke case on 100 inserted clumps (LIGGGHTS' multisphere deck): the bodies' state comes back from
+#: the restart file once the templates and fix multisphere are defined again; the platens' heights once
+#: closed on the inserted sample are resume state
+CLUMPS = REPO / "tests" / "data" / "triaxial_smoke_clumps.yaml"
 
 
 @pytest.mark.parametrize("engine,case", [pytest.param("liggghts", SMOKE, id="liggghts"),
                                          pytest.param("yade", SMOKE, id="yade"),
                                          pytest.param("liggghts", CREEP, id="liggghts-creep",
                                                       marks=pytest.mark.slow(reason="a third kill-and-resume "
-                                                                             "sequence, ~40 s"))])
+                                                                             "sequence, ~40 s")),
+                                         pytest.param("liggghts", CLUMPS, id="liggghts-clumps")])
 def test_killed_triaxial_resumes_exactly(engine, case, tmp_path, engines_installed):
     quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     cmd = lambda runs: orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet")

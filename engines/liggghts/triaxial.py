@@ -100,9 +100,20 @@ RESTART_STATE_COLUMNS = ("step", "stage", "chunks", "dragon", "ramp_start", "zto
 #: the column a deck with the creep test (scene.isotropic.creep_tolerance) adds: the last chunk-mean
 #: boundary volume [m^3], as printed (text, like TEXT_COLUMNS)
 CREEP_COLUMN = "vprev"
+#: the columns a deck with inserted clumps adds (after the creep column when both are there): the bottom
+#: and top platens' heights [m] once closed on the inserted sample, as printed
+CLUMP_COLUMNS = ("zb0", "zt0")
 #: the columns a resumed deck sets from their text as LIGGGHTS printed it (15 digits): the deck it
 #: resumes gave them the same text (``variable ZS equal ${ztend}``), so both runs hold the same double
 TEXT_COLUMNS = ("ztot", "vlast", "H0", "esum", "elast")
+
+
+def _state_columns(n: int) -> tuple[str, ...] | None:
+    """The columns of a state line of ``n`` fields: the base ones, then the creep column, the clump
+    columns or both (their counts tell them apart); None for any other count."""
+    extra = {0: (), 1: (CREEP_COLUMN,), 2: CLUMP_COLUMNS, 3: (CREEP_COLUMN,) + CLUMP_COLUMNS}
+    more = n - len(RESTART_STATE_COLUMNS)
+    return RESTART_STATE_COLUMNS + extra[more] if more in extra else None
 
 
 def read_restart_states(run_dir: Path) -> dict[int, dict]:
@@ -114,8 +125,8 @@ def read_restart_states(run_dir: Path) -> dict[int, dict]:
         return out
     for line in f.read_text().splitlines():
         parts = line.split()
-        cols = RESTART_STATE_COLUMNS + ((CREEP_COLUMN,) if len(parts) == len(RESTART_STATE_COLUMNS) + 1 else ())
-        if len(parts) != len(cols):
+        cols = _state_columns(len(parts))
+        if cols is None:
             continue                                    # a line cut by a kill, or a comment
         try:
             row = dict(zip(cols, (float(x) for x in parts)))
@@ -123,7 +134,7 @@ def read_restart_states(run_dir: Path) -> dict[int, dict]:
             continue
         for k in ("step", "stage", "chunks", "dragon", "ramp_start", "shear_start"):
             row[k] = int(row[k])
-        row["text"] = {k: parts[cols.index(k)] for k in TEXT_COLUMNS + (CREEP_COLUMN,) if k in cols}
+        row["text"] = {k: parts[cols.index(k)] for k in TEXT_COLUMNS + (CREEP_COLUMN,) + CLUMP_COLUMNS if k in cols}
         out[row["step"]] = row
     return out
 
@@ -153,12 +164,6 @@ def resume_point(run_dir: Path, resume: dict | None) -> dict | None:
     asks for when an older one is tried), ``triax.txt`` and ``state.txt`` are cut back to its step.
     With no usable file the run starts afresh, and stale restart files are removed."""
     run_dir = Path(run_dir)
-    params_file = run_dir / "params.json"
-    if resume is not None and params_file.exists() and \
-            (json.loads(params_file.read_text()).get("scene") or {}).get("clumps"):
-        # a resumed multisphere deck would have to define the templates and fix multisphere again
-        # before read_restart: not built, so a LIGGGHTS clump run starts afresh (docs/triaxial.md)
-        resume = None
     states = read_restart_states(run_dir)
     if resume is not None:
         step_of = lambda c: int(Path(c).name.split(".")[1])
@@ -172,6 +177,7 @@ def resume_point(run_dir: Path, resume: dict | None) -> dict | None:
                           scene_state=states[step])
             _keep_rows_upto(run_dir / "triax.txt", step)
             _keep_rows_upto(run_dir / "restart" / "state.txt", step)
+            _keep_rows_upto(run_dir / "dump" / "clump_energy.txt", step)     # inserted clumps' energies
             return resume
     # starting afresh: no stale restart file or state line may be picked up later
     for f in (run_dir / "restart").glob("state.*.restart"):
