@@ -15,6 +15,7 @@ import yaml
 from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, field_validator,
                       model_validator)
 
+from .clumps import library_digest
 from .derive import DerivationError, derive
 from .analysis_specs import parse_specs
 from .registry import engine_names, get_scene, scene_kinds
@@ -341,6 +342,14 @@ class Case(Strict):
         for section, field in self._UNHASHED_AT_DEFAULT:
             if field in d.get(section, {}) and d[section][field] is None:
                 d[section].pop(field)
+        # files by what the run reads from them, not by where they lie (absolute paths once loaded):
+        # the clump library by its shapes; the initial packing's frames file is hashed by its grains
+        # (orchestrator.runner.run_hash, packing_digest), so its path goes
+        particles = d.get("scene", {}).get("particles")
+        if isinstance(particles, dict) and particles.get("library"):
+            particles["library"] = "sha256:" + library_digest(particles["library"])
+        if isinstance(d.get("initial_packing"), dict):
+            d["initial_packing"].pop("frames", None)
         return json.dumps(d, sort_keys=True)
 
 

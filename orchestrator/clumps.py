@@ -17,6 +17,7 @@ All SI in the results.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 
@@ -26,6 +27,17 @@ import yaml
 
 class LibraryError(ValueError):
     """A shape library that cannot be used: the file, the shape and what is wrong."""
+
+
+def library_digest(path) -> str:
+    """sha256 of a clump library's shapes as :func:`load_library` reads them (their order, member
+    spheres and radii as little-endian doubles): what a run depends on, not where the file lies nor
+    its comments, so a run hash (orchestrator.case.Case.hash_input) survives moving the checkout."""
+    h = hashlib.sha256()
+    for sp in load_library(path):
+        h.update(np.int64(len(sp)).tobytes())
+        h.update(np.ascontiguousarray(sp, dtype="<f8").tobytes())
+    return h.hexdigest()
 
 
 def load_library(path) -> list[np.ndarray]:

@@ -357,3 +357,23 @@ def test_yade_triaxial_with_clumps(tmp_path):
         mp = mass_properties(members[[row[m] for m in mem]], density=rho, cells=60)
         assert mass == pytest.approx(mp["mass"], rel=0.03)
         assert np.sort(inertia) == pytest.approx(mp["principal"], rel=0.06)
+
+
+def test_run_hash_follows_the_library_shapes_not_its_path(tmp_path):
+    """The run hash holds the clump library by its shapes: the same case and library in two places
+    (a moved or second checkout) hash alike, so a run there is found and resumed; a comment in the
+    library changes nothing; a changed member radius makes a new run."""
+    from orchestrator.runner import run_hash
+    text = LIB.read_text()
+    hashes = {}
+    for name, lib in (("a", text), ("b", text), ("comment", "# a comment\n" + text),
+                      ("radius", text.replace("[0, 0, 0, 1.0], [1.2, 0, 0, 1.0]", "[0, 0, 0, 1.0], [1.2, 0, 0, 0.9]"))):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "shapes.yaml").write_text(lib)
+        (d / "case.yaml").write_text(f"extends: {SMOKE}\nscene:\n  particles:\n    shape: clumps\n"
+                                     "    library: shapes.yaml\n")
+        hashes[name] = run_hash(load_case(d / "case.yaml"), "yade", "2023.02")
+    assert "[1.2, 0, 0, 1.0]" in text                        # the radius edit below takes
+    assert hashes["a"] == hashes["b"] == hashes["comment"]
+    assert hashes["radius"] != hashes["a"]
