@@ -377,3 +377,15 @@ def test_run_hash_follows_the_library_shapes_not_its_path(tmp_path):
     assert "[1.2, 0, 0, 1.0]" in text                        # the radius edit below takes
     assert hashes["a"] == hashes["b"] == hashes["comment"]
     assert hashes["radius"] != hashes["a"]
+
+
+def test_liggghts_clumps_on_several_ranks_are_refused():
+    """LIGGGHTS-PUBLIC's multisphere bodies run on one process (on 2 ranks fix insert/pack put 310 of
+    311 member spheres in): a clump case asking for 2 ranks is refused when loaded, naming the field
+    and the fix, before anything runs."""
+    from orchestrator.case import CaseError
+    with pytest.raises(CaseError, match=r"engine_options.mpi_ranks: 2 ranks.*one process.*set engine_options.mpi_ranks: 1"):
+        load_case(SMOKE, overrides={"scene": {"particles": {"shape": "clumps", "library": str(LIB)}},
+                                    "contact": {"substitutes": SUBS}, "engine_options": {"mpi_ranks": 2}})
+    load_case(SMOKE, overrides={"scene": {"particles": {"shape": "clumps", "library": str(LIB)}},
+                                "contact": {"substitutes": SUBS}, "engine_options": {"mpi_ranks": 1}})
