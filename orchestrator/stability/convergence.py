@@ -292,6 +292,11 @@ def plot_ladder(df, knob: str, path, target_error: float, ext=None):
     ax = axes[0] if with_ext else axes
     floor = None
     for eng, g in df.groupby("engine"):
+        ref = g[g["reference"]]
+        t_ref = pd.to_numeric(ref["engine_time_s"], errors="coerce").to_numpy(float)
+        if len(t_ref) and np.isfinite(t_ref[0]):     # error 0 by definition: its cost as a line
+            ax.axvline(t_ref[0], ls=":", color="grey",
+                       label=f"{eng} reference ({knob} {ref[knob].iloc[0]}): {t_ref[0]:.3g} s")
         g = g[~g["reference"]]
         if not len(g):
             continue
