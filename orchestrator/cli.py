@@ -24,20 +24,37 @@ def _num(x) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
+def _refusal(case, params, eng_name: str) -> str | None:
+    """Why engine ``eng_name`` cannot run the case as written (a feature it lacks, with no substitute
+    the case accepts: ``Engine.check``, what the run itself would refuse before it starts), or None."""
+    from engines.base import UnsupportedFeature
+    eng = get_engine(eng_name)
+    try:
+        eng.check(eng.required_features(case, params), case.contact.substitutes)
+    except UnsupportedFeature as exc:
+        return str(exc)
+    return None
+
+
 def cmd_validate(args) -> int:
     from .case import load_case
     from .derive import derive
     case = load_case(args.case)
     p = derive(case)
     con = _console()
-    con.print(f"[green]{args.case}: valid[/green] — case '{case.name}', scene '{case.scene.kind}', "
-              f"engines {', '.join(case.engines)}")
+    refusals = {eng: why for eng in case.engines if (why := _refusal(case, p, eng))}
+    verdict = (f"[green]{args.case}: valid[/green]" if not refusals else
+               f"[red]{args.case}: not runnable on {', '.join(refusals)} as written[/red]")
+    con.print(f"{verdict} — case '{case.name}', scene '{case.scene.kind}', engines {', '.join(case.engines)}")
     con.print(f"  dt = {p['dt']:.4g} s = {p['dt_fraction']:.3g} × critical {p['dt_critical']:.4g} s "
               f"(Rayleigh {p['dt_rayleigh']:.4g} s, Hertz t_c/10 {p['dt_hertz']:.4g} s)")
     con.print(f"  features: {', '.join(p['features'])}")
     from .sizing import busy_cores, busy_note, describe, estimate, problems
     busy_now = busy_cores()                     # sampled once: validate runs nothing
     for eng in case.engines:
+        if eng in refusals:
+            con.print(f"  [red]{eng}: cannot run this case: {refusals[eng]}[/red]")
+            continue
         size = estimate(case, p, eng)
         con.print(f"  {eng}: {describe(size)}")
         busy = busy_note(get_engine(eng).workers(case), busy_now) if busy_now is not None else None
@@ -45,7 +62,7 @@ def cmd_validate(args) -> int:
             con.print(f"  [yellow]{busy}[/yellow]")
         for prob in problems(case, size):
             con.print(f"  [yellow]{prob if prob.startswith('warning:') else 'too big: ' + prob + ' (run refuses it unless --force)'}[/yellow]")
-    return 0
+    return 2 if refusals else 0
 
 
 def cmd_run(args) -> int:
@@ -58,6 +75,10 @@ def cmd_run(args) -> int:
     from .derive import derive
     from .sizing import busy_note, check_fits, describe, estimate
     params = derive(case)
+    from .case import CaseError
+    refusals = [f"engine {eng}: {why}" for eng in engines if (why := _refusal(case, params, eng))]
+    if refusals:                                  # refused before any sizing, packing or run directory
+        raise CaseError(case.source or args.case, refusals)
     for eng in engines:
         size = estimate(case, params, eng)
         warnings = check_fits(case, size, force=args.force)        # refuses a case too big for the machine

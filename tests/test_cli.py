@@ -57,6 +57,25 @@ def test_dry_run_sizes_without_work(tmp_path):
     assert not (tmp_path / "runs").exists()
 
 
+def test_validate_and_dry_run_refuse_what_an_engine_cannot_run(tmp_path):
+    """A clump triaxial on LIGGGHTS without the inserted_clumps substitute: the run itself would stop
+    before it starts, so validate and --dry-run say so too (the file, the engine, the substitute to
+    accept), exit 2 and create nothing; the engine that can run it is still sized."""
+    case = tmp_path / "clumps.yaml"
+    case.write_text(f"extends: {REPO / 'cases' / 'triaxial_smoke.yaml'}\nscene:\n  particles:\n    shape: clumps\n"
+                    f"    library: {REPO / 'tests' / 'data' / 'clumps_smoke.yaml'}\n"
+                    "contact:\n  substitutes:\n    liggghts.membrane: shell_pressure\n")
+    out = cli("validate", case)
+    assert out.returncode == 2 and "not runnable on liggghts" in out.stdout, out.stdout + out.stderr
+    assert "liggghts: cannot run this case" in out.stdout and "inserted_clumps" in out.stdout
+    assert "yade: 919 particles" in out.stdout
+    dry = cli("run", case, "--engine", "liggghts", "--dry-run", "--runs", tmp_path / "runs")
+    assert dry.returncode == 2 and str(case) in dry.stderr and "engine liggghts" in dry.stderr
+    assert "contact.substitutes" in dry.stderr and "Traceback" not in dry.stderr
+    assert not (tmp_path / "runs").exists()
+    assert cli("run", case, "--engine", "yade", "--dry-run", "--runs", tmp_path / "runs").returncode == 0
+
+
 @pytest.mark.engine
 def test_verify_prints_a_table_per_engine(runs_root, engines_installed, tmp_path):
     # the command end to end on test 1 and test 4 (tests/test_verification.py covers every case)
