@@ -929,9 +929,10 @@ def slab_hull_volume(pos: np.ndarray, r: np.ndarray, z_bottom: float, z_top: flo
 
 
 def _solid_volume(sc: dict, r: np.ndarray) -> float | None:
-    """Solid volume [m³] of the sample: Σ 4/3 π r³ of the spheres; for LIGGGHTS' inserted clumps the
-    templates' union volumes times their counts; None for placed clumps (members overlap, and the
-    run keeps no per-clump volume)."""
+    """Solid volume [m³] of the sample: Σ 4/3 π r³ of the spheres. For clumps (members overlap) the
+    inserted-clumps table's union volumes times their counts, which derive() writes for every engine:
+    its size classes keep the sampled PSD's total solid volume (to 1e-12), the volume YADE's placed
+    clumps are scaled to as well (docs/triaxial.md, Clumps); None when the table is missing."""
     cl = sc.get("clumps")
     if not cl:
         return float(np.sum(4 / 3 * np.pi * r ** 3))
