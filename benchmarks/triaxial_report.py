@@ -11,7 +11,8 @@ elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3
 ε_a = 1, 2, 5, 10, 15 % (orchestrator.stability.observables, the source of the crossval numbers).
 ``stage1_speeds``: per stage-1 frame the median, rms and largest grain speed and the boundary
 volume change, by phase (full drag, ramp, drag-free): whether the drag-supported sample comes to
-rest or creeps.
+rest or creeps. ``stage1_solid_fraction``: (step, height [mm], solid fraction, σ1/p) at 12 rows of
+stage 1 from ``triax.txt`` (a drag-held sample reads σ1 ≈ p while it still compacts).
 """
 from __future__ import annotations
 
@@ -186,6 +187,26 @@ def stage1_speeds(run: Path, log: str, steps: np.ndarray, sp: np.ndarray) -> lis
     return rows
 
 
+def stage1_solid_fraction(run: Path, points: int = 12) -> list:
+    """Stage 1's compaction from ``triax.txt`` (works on a run still going): at ``points`` rows evenly
+    spread over stage 1, (step, sample height [mm], solid fraction = the grains' solid volume over the
+    boundary volume, σ1/p_now). A drag-held sample reads σ1 ≈ p while its solid fraction still rises."""
+    from orchestrator.scenes.triaxial import _solid_volume, read_series
+    params = json.loads((run / "params.json").read_text())
+    r = np.loadtxt(run / "particles.txt", ndmin=2, comments="#")[:, 1]
+    vs = _solid_volume(params["scene"], r)
+    s = read_series(run)
+    iso = np.flatnonzero((s["stage"] == 1) & (s["pressure"] > 0))
+    if vs is None or not len(iso):
+        return []
+    out = []
+    for k in iso[np.linspace(0, len(iso) - 1, min(points, len(iso))).astype(int)]:
+        H = s["z_top"][k] - s["z_bottom"][k]
+        out.append((int(s["step"][k]), round(float(H) * 1e3, 3), round(float(vs / s["volume"][k]), 3),
+                    round(float(s["f_top"][k] / (s["volume"][k] / H) / s["pressure"][k]), 3)))
+    return out
+
+
 def report(run: Path) -> dict:
     run = Path(run)
     log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
@@ -200,6 +221,7 @@ def report(run: Path) -> dict:
     if not off and re.search(r"^ISO converged with drag: drag off", log, re.M):
         out["drag_off_note"] = "drag switched off at once (no ramp)"
     out["drag_off"] = off
+    out["stage1_solid_fraction"] = stage1_solid_fraction(run)      # (step, H [mm], solid fraction, σ1/p)
     steps, sp, _ = _frames(run)
     if off and len(steps):
         k0 = int(np.searchsorted(steps, off[0] - 1))      # the frame at (or just after) the drag-off step
