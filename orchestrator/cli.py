@@ -26,11 +26,12 @@ def _num(x) -> str:
 # ---------------------------------------------------------------------------------------------
 def _refusal(case, params, eng_name: str) -> str | None:
     """Why engine ``eng_name`` cannot run the case as written (a feature it lacks, with no substitute
-    the case accepts: ``Engine.check``, what the run itself would refuse before it starts), or None."""
+    the case accepts: :func:`orchestrator.runner.engine_substitutions`, what the run itself checks
+    before it starts), or None."""
     from engines.base import UnsupportedFeature
-    eng = get_engine(eng_name)
+    from .runner import engine_substitutions
     try:
-        eng.check(eng.required_features(case, params), case.contact.substitutes)
+        engine_substitutions(case, eng_name, params)
     except UnsupportedFeature as exc:
         return str(exc)
     return None

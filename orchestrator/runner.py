@@ -124,12 +124,20 @@ def _lock_held(run_dir: Path) -> bool:
     return False
 
 
+def engine_substitutions(case: Case, engine_name: str, params) -> list:
+    """The substitutions ``engine_name`` makes for the case's features (``Engine.check``); raises
+    :class:`engines.base.UnsupportedFeature` for a feature it lacks with no substitute the case
+    accepts. What a run checks before it starts, and ``validate`` / ``run --dry-run`` with it."""
+    eng = get_engine(engine_name)
+    return eng.check(eng.required_features(case, params), case.contact.substitutes)
+
+
 def prepare(case: Case, engine_name: str, run_dir: Path, params: Params | None = None) -> tuple[Params, list]:
     """Derive parameters (unless given), check capabilities, write case/params/particles.
     Returns (params completed with the scene's files and packed geometry, subs)."""
     eng = get_engine(engine_name)
     params = derive(case) if params is None else params
-    subs = eng.check(eng.required_features(case, params), case.contact.substitutes)
+    subs = engine_substitutions(case, engine_name, params)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_text(run_dir / "case.yaml", yaml.safe_dump(case.resolved(), sort_keys=False))
     packing = apply_initial_packing(case, params, run_dir)      # None without case.initial_packing

@@ -22,6 +22,8 @@ from orchestrator.clumps import (LibraryError, bounding_radius, equivalent_scale
 REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 LIB = REPO / "tests" / "data" / "clumps_smoke.yaml"
+#: the smoke triaxial on 100 inserted clumps of LIB, 3 isotropic chunks at most, 1 % axial strain
+SMOKE_CLUMPS = REPO / "tests" / "data" / "triaxial_smoke_clumps.yaml"
 
 
 def test_library_formats_and_errors(tmp_path):
@@ -206,8 +208,7 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
     from orchestrator.runner import run_case
     if shutil.which("liggghts") is None:
         pytest.fail("liggghts is not installed; run `bash .ci/setup`")
-    case = _liggghts_clump_case(grains=100, axial_strain=0.01, frames=4,
-                                isotropic={"max_chunks": 3, "inertial_number": 5e-3})
+    case = load_case(SMOKE_CLUMPS)          # the resume test's case (tests/test_triaxial_resume.py)
     out = run_case(case, "liggghts", runs_root=tmp_path, progress=False)
     assert out.status == "complete", out.status
     assert any(s["mechanism"] == "inserted_clumps" for s in out.summary["substitutions"])
