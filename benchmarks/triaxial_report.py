@@ -191,7 +191,7 @@ def stage1_solid_fraction(run: Path, points: int = 12) -> list:
     """Stage 1's compaction from ``triax.txt`` (works on a run still going): at ``points`` rows evenly
     spread over stage 1, (step, sample height [mm], solid fraction = the grains' solid volume over the
     boundary volume, σ1/p_now). A drag-held sample reads σ1 ≈ p while its solid fraction still rises."""
-    from orchestrator.scenes.triaxial import _solid_volume, read_series
+    from orchestrator.scenes.triaxial import _solid_volume, analyse, read_series
     params = json.loads((run / "params.json").read_text())
     r = np.loadtxt(run / "particles.txt", ndmin=2, comments="#")[:, 1]
     vs = _solid_volume(params["scene"], r)
@@ -199,12 +199,11 @@ def stage1_solid_fraction(run: Path, points: int = 12) -> list:
     iso = np.flatnonzero((s["stage"] == 1) & (s["pressure"] > 0))
     if vs is None or not len(iso):
         return []
-    out = []
-    for k in iso[np.linspace(0, len(iso) - 1, min(points, len(iso))).astype(int)]:
-        H = s["z_top"][k] - s["z_bottom"][k]
-        out.append((int(s["step"][k]), round(float(H) * 1e3, 3), round(float(vs / s["volume"][k]), 3),
-                    round(float(s["f_top"][k] / (s["volume"][k] / H) / s["pressure"][k]), 3)))
-    return out
+    sigma1 = analyse(s, params["scene"]["pressure"])["sigma1"]
+    H = s["z_top"] - s["z_bottom"]
+    return [(int(s["step"][k]), round(float(H[k]) * 1e3, 3), round(float(vs / s["volume"][k]), 3),
+             round(float(sigma1[k] / s["pressure"][k]), 3))
+            for k in iso[np.linspace(0, len(iso) - 1, min(points, len(iso))).astype(int)]]
 
 
 def report(run: Path) -> dict:
