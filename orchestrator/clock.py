@@ -68,7 +68,7 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
-           "speed_ratio", "clock_key", "base_kind", "table_entry"]
+           "speed_ratio", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -355,10 +355,12 @@ def speed_factor(records, scene: str | None = None, n_particles: int | None = No
     differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42). None without
     a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py`` apply."""
     records = _prefer_quiet([r for r in records if r[2] is not None and r[2] > 0])
-    same = [r for r in records if scene is not None and r[0] == scene]
-    if not same and scene is not None and base_kind(scene) != scene:      # a variant not measured yet
-        scene = base_kind(scene)
-        same = [r for r in records if r[0] == scene]
+    same = []
+    for key in key_fallbacks(scene) if scene is not None else []:     # a variant not measured yet
+        same = [r for r in records if r[0] == key]
+        if same:
+            scene = key
+            break
     use = same or records
     if not use:
         return None
@@ -388,15 +390,16 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         machine_speed = table is None
     user = _user_table()
     table = load_table(user) if table is None else table
-    if machine_speed:
-        mf = machine_factor(engine, scene, n_particles)
-        if mf is not None and scene not in user.get(engine, {}):
-            scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
     scenes = table.get(engine, {})
-    tp = table_entry(scenes, scene)
-    if tp is not None:
-        basis = (f"measured on {tp.runs} {engine} {scene} run(s)" if scene in scenes else
-                 f"no {scene} run measured on {engine}: the {base_kind(scene)} entry, {tp.runs} run(s)")
+    used = table_entry_key(scenes, scene)
+    if machine_speed and (used or scene) not in user.get(engine, {}):    # a user entry is this machine's
+        mf = machine_factor(engine, scene, n_particles)
+        if mf is not None:
+            scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
+    if used is not None:
+        tp = scenes[used]
+        basis = (f"measured on {tp.runs} {engine} {scene} run(s)" if used == scene else
+                 f"no {scene} run measured on {engine}: the {used} entry, {tp.runs} run(s)")
         return scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks), basis + note
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
@@ -443,15 +446,16 @@ def _sample(run_dir: Path) -> RunSample | None:
     # scenes, e.g. the triaxial's stage figures, and the kind's name for others)
     try:
         case = yaml.safe_load((run_dir / "case.yaml").read_text()) or {}
-        kind = (case.get("scene") or {}).get("kind", "")
+        scene_section = case.get("scene") or {}
+        kind = scene_section.get("kind", "")
         substitutes = (case.get("contact") or {}).get("substitutes") or {}
     except (OSError, ValueError, AttributeError):
-        kind, substitutes = "", {}
+        kind, substitutes, scene_section = "", {}, {}
     if not kind and isinstance(s.get("scene"), str):
         kind = s["scene"]
     ranks = max(int(s.get("workers") or 1), 1)
     plan = step_plan(kind, sc)
-    key = clock_key(kind, s["engine"], substitutes)
+    key = clock_key(kind, s["engine"], substitutes, scene_section if isinstance(scene_section, dict) else {})
     engine_s = float(wt["engine"])
     # the engine's own loop time where its log gives one (0 or absent: not measured, e.g. YADE's)
     loop = float(wt["engine_loop"]) if isinstance(wt.get("engine_loop"), (int, float)) and wt["engine_loop"] > 0 \
@@ -486,15 +490,17 @@ def _machine_load(attempts: list) -> tuple[float | None, int | None]:
     return sum(a["load"] * a["wall_s"] for a in rows) / wall, cores
 
 
-def clock_key(kind: str, engine: str, substitutes: dict | None = None) -> str:
+def clock_key(kind: str, engine: str, substitutes: dict | None = None, scene: dict | None = None) -> str:
     """The throughput table's key for a run of scene ``kind`` on ``engine`` with the case's
-    ``contact.substitutes``: the kind, or ``kind:variant`` where the scene's deck on that engine
-    costs differently per step with a substitute (:meth:`~orchestrator.scenes.base.Scene.clock_variant`:
-    YADE's triaxial on the shell pressure runs 1.3-1.7 ms a step on 2 000 grains, on its PFacet
-    membrane 5.3 ms, docs/validation.md)."""
+    ``contact.substitutes`` and ``scene:`` section (a plain mapping): the kind, or ``kind:variant``
+    where the scene's deck on that engine costs differently per step
+    (:meth:`~orchestrator.scenes.base.Scene.clock_variant`: YADE's triaxial on the shell pressure
+    runs 1.3-1.7 ms a step on 2 000 grains, on its PFacet membrane 5.3 ms, docs/validation.md; a
+    clump sample of 32 000 member spheres runs at 40-60 steps/s on YADE where the sphere entry
+    predicts 91)."""
     from .registry import get_scene
     try:
-        variant = get_scene(kind).clock_variant(engine, dict(substitutes or {}))
+        variant = get_scene(kind).clock_variant(engine, dict(substitutes or {}), dict(scene or {}))
     except (LookupError, TypeError, ValueError):
         variant = None
     return f"{kind}:{variant}" if variant else kind
@@ -505,10 +511,30 @@ def base_kind(key: str) -> str:
     return key.split(":", 1)[0]
 
 
+def key_fallbacks(key: str) -> list[str]:
+    """``key`` and the keys that stand in for it while it has no runs, nearest first: the variant
+    without its last "+" part, and so on down to the scene kind
+    (``triaxial:shell_pressure+clumps`` -> ``triaxial:shell_pressure`` -> ``triaxial``)."""
+    out = [key]
+    kind, _, variant = key.partition(":")
+    parts = variant.split("+") if variant else []
+    while parts:
+        parts.pop()
+        out.append(f"{kind}:{'+'.join(parts)}" if parts else kind)
+    return out
+
+
+def table_entry_key(entries: dict, key: str) -> str | None:
+    """The key of the entry among one engine's table ``entries`` that serves ``key``: its own, or
+    the nearest of :func:`key_fallbacks` for a variant not measured yet; None without one."""
+    return next((k for k in key_fallbacks(key) if entries.get(k)), None)
+
+
 def table_entry(entries: dict, key: str):
     """The entry of ``key`` among one engine's table ``entries``, or for a variant not measured
-    yet its scene's (:func:`base_kind`); None without either."""
-    return entries.get(key) or entries.get(base_kind(key))
+    yet the nearest that stands in (:func:`table_entry_key`); None without one."""
+    k = table_entry_key(entries, key)
+    return entries[k] if k else None
 
 
 def step_plan(kind: str, scene_params: dict):

@@ -216,7 +216,8 @@ def clock_inputs(case: Case, sc: dict, engine_name: str) -> tuple:
     :func:`orchestrator.clock.step_plan`)."""
     kind = case.scene.kind
     plan = step_plan(kind, sc)
-    return clock_key(kind, engine_name, case.contact.substitutes), step_budget(sc, plan), plan
+    return (clock_key(kind, engine_name, case.contact.substitutes, case.scene.model_dump(mode="json")),
+            step_budget(sc, plan), plan)
 
 
 def _engine_time(case: Case, params: dict, engine_name: str, key: str, steps: int, plan, table: dict | None,

@@ -361,3 +361,28 @@ def test_yades_triaxial_on_the_shell_is_its_own_clock_entry():
     assert speed_factor(recs, "triaxial:shell_pressure", 2000)[0] == pytest.approx(0.35)
     assert speed_factor(recs, "triaxial", 2000)[0] == pytest.approx(1.1)
     assert speed_factor(recs[:1], "triaxial:shell_pressure", 2000)[0] == pytest.approx(1.1)
+
+
+def test_clump_samples_are_their_own_clock_entry_and_fall_back_to_their_boundarys_spheres():
+    from orchestrator.clock import Throughput, clock_key, estimate_engine_time, key_fallbacks, speed_factor
+    shell = {"yade.membrane": "shell_pressure", "liggghts.membrane": "shell_pressure",
+             "liggghts.placed_clumps": "inserted_clumps"}
+    clumps = {"particles": {"shape": "clumps", "library": "shapes/ct_synthetic.yaml"}}
+    assert clock_key("triaxial", "yade", shell, clumps) == "triaxial:shell_pressure+clumps"
+    assert clock_key("triaxial", "liggghts", shell, clumps) == "triaxial:shell_pressure+clumps"
+    assert clock_key("triaxial", "yade", {}, clumps) == "triaxial:clumps"          # PFacet membrane
+    assert clock_key("triaxial", "yade", shell, {"particles": {"shape": "spheres"}}) == "triaxial:shell_pressure"
+    assert key_fallbacks("triaxial:shell_pressure+clumps") == ["triaxial:shell_pressure+clumps",
+                                                               "triaxial:shell_pressure", "triaxial"]
+    # not measured yet: the same boundary's sphere entry stands in (not the PFacet one), and the
+    # basis names it; once measured, its own entry
+    sphere = Throughput(0.0, 0.0, 1e-6, 0.7, 2, "")
+    pfacet = Throughput(0.0, 3e-3, 1e-6, 0.7, 3, "")
+    table = {"yade": {"triaxial": pfacet, "triaxial:shell_pressure": sphere}}
+    t, basis = estimate_engine_time("yade", "triaxial:shell_pressure+clumps", 32000, 1000, table=table)
+    assert t == pytest.approx(1000 * 32000 * 1e-6) and "the triaxial:shell_pressure entry" in basis
+    table["yade"]["triaxial:shell_pressure+clumps"] = Throughput(0.0, 0.0, 2.2e-6, 0.7, 1, "")
+    t, basis = estimate_engine_time("yade", "triaxial:shell_pressure+clumps", 32000, 1000, table=table)
+    assert t == pytest.approx(1000 * 32000 * 2.2e-6) and basis.startswith("measured on 1 yade")
+    recs = [("triaxial", 2000, 1.1, True), ("triaxial:shell_pressure", 2000, 0.35, True)]
+    assert speed_factor(recs, "triaxial:shell_pressure+clumps", 32000)[0] == pytest.approx(0.35, rel=0.2)

@@ -184,12 +184,21 @@ class Scene(ABC):
         sample than the rung's."""
         return []
 
-    def clock_variant(self, engine: str, substitutes: dict) -> str | None:
-        """A name for the variant of this scene's deck on ``engine`` that the case's
-        ``contact.substitutes`` select, where they change the cost of a step (the run-time model
-        keys on it: :func:`orchestrator.clock.clock_key`): the engine's substitutes for the terms
-        of :attr:`clock_terms`, joined; None without one."""
+    def clock_features(self, scene: Mapping) -> tuple[str, ...]:
+        """Names of what in the case's ``scene:`` section (a plain mapping) changes the cost of a
+        step on every engine (the run-time model keys on them after the substitutes:
+        :meth:`clock_variant`); empty (the default): nothing does."""
+        return ()
+
+    def clock_variant(self, engine: str, substitutes: dict, scene: Mapping | None = None) -> str | None:
+        """A name for the variant of this scene's deck on ``engine`` that the case selects where it
+        changes the cost of a step (the run-time model keys on it:
+        :func:`orchestrator.clock.clock_key`): the engine's ``contact.substitutes`` for the terms of
+        :attr:`clock_terms`, then the :meth:`clock_features` of the ``scene:`` section, joined by
+        "+"; None without one. The order matters: a variant not measured yet falls back to the
+        entry without its last part (:func:`orchestrator.clock.key_fallbacks`)."""
         picked = [substitutes.get(f"{engine}.{term}") for term in self.clock_terms]
+        picked += list(self.clock_features(scene or {}))
         return "+".join(p for p in picked if p) or None
 
     def step_plan(self, scene_params: Mapping) -> StepPlan | None:

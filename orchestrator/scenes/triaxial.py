@@ -1155,6 +1155,12 @@ class TriaxialScene(base.Scene):
     observables = ("peak_stress_ratio", "sigma3_error")
     count_field = "grains"
 
+    def clock_features(self, scene):
+        """``clumps`` for grains of measured shapes: a step costs more than the member spheres' count
+        says (each clump's rigid-body update and its members' force sums; LIGGGHTS' multisphere
+        fix, YADE's clump members)."""
+        return ("clumps",) if ((scene or {}).get("particles") or {}).get("shape") == "clumps" else ()
+
     def size_overrides(self, section, scale):
         """The sample's diameter and height × ``scale`` (the aspect kept): ``grains`` × scale³
         where the case sets it, else the two lengths."""
