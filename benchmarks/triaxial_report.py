@@ -23,8 +23,16 @@ import re
 import sys
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pandas as pd
+
+from orchestrator.analysis.triaxial import triaxial_curves
+from orchestrator.case import load_case
+from orchestrator.frames import Frames
+from orchestrator.scenes.triaxial import (SLAB_HULL_D50, _solid_volume, analyse, read_series, slab_hull_volume,
+                                          void_ratios_at_loading)
+from orchestrator.stability.observables import observables
 
 FLOOR = 1.0          # m/s, issue #14: no grain above 1 m/s in the frame after the drag goes off
 
@@ -36,7 +44,6 @@ def _log_steps(log: str, pattern: str) -> list[int]:
 def _frames(run: Path):
     """(steps, speeds (frames, grains), stage or None) from frames.h5, else from YADE's dump chunks."""
     if (run / "frames.h5").exists():
-        import h5py
         with h5py.File(run / "frames.h5") as h:
             v = h["frames/velocity"][:]
             st = h["frames/step"][:]
@@ -67,8 +74,6 @@ def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floo
     deepest waist (:func:`neck_depth`), which the global hull bridges and the slab hull follows."""
     if not (run / "frames.h5").exists():
         return {}
-    from orchestrator.frames import Frames
-    from orchestrator.scenes.triaxial import SLAB_HULL_D50, slab_hull_volume
     f = Frames(run)
     c = f.controls
     if "volumetric_strain_hull" not in c:
@@ -147,7 +152,6 @@ def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int 
     i0 = int(np.flatnonzero(stage >= 2)[0]) - 1
     H = zt - zb
     s1, s3 = ftop / (vol / H), flat / area
-    from orchestrator.analysis.triaxial import triaxial_curves
     sl = slice(i0 + 1, None)
     ea = (H[i0] - H[sl]) / H[i0]
     ev = (vol[i0] - vol[sl]) / vol[i0]
@@ -191,7 +195,6 @@ def stage1_solid_fraction(run: Path, points: int = 12) -> list:
     """Stage 1's compaction from ``triax.txt`` (works on a run still going): at ``points`` rows evenly
     spread over stage 1, (step, sample height [mm], solid fraction = the grains' solid volume over the
     boundary volume, σ1/p_now). A drag-held sample reads σ1 ≈ p while its solid fraction still rises."""
-    from orchestrator.scenes.triaxial import _solid_volume, analyse, read_series
     params = json.loads((run / "params.json").read_text())
     r = np.loadtxt(run / "particles.txt", ndmin=2, comments="#")[:, 1]
     vs = _solid_volume(params["scene"], r)
@@ -238,6 +241,9 @@ def report(run: Path) -> dict:
         s = json.loads(summ.read_text())
         out["isotropic_end"] = {k: s["isotropic_end"].get(k) for k in ("converged", "sigma1_error", "sigma3_error",
                                                                        "void_ratio", "steps")}
+        if (out["isotropic_end"].get("void_ratio") or {}).get("interior") is None:
+            # a clump run post-processed before the interior figure counted clumps: from its frames
+            out["isotropic_end"]["void_ratio"] = void_ratios_at_loading(run) or out["isotropic_end"].get("void_ratio")
         sh = s.get("shear", {})
         out["sigma3_stray_smoothed"] = sh.get("sigma3_error_max_abs_smoothed")
         out["peak_stress_ratio"] = sh.get("peak_stress_ratio")
@@ -245,7 +251,6 @@ def report(run: Path) -> dict:
         out["dev_volumetric_strain_max"] = s.get("volume_methods", {}).get("volumetric_strain_max_abs_diff")
     en = run / "analysis" / "energy_summary.csv"
     if en.exists() and (run / "frames.h5").exists():
-        import h5py
         with h5py.File(run / "frames.h5") as h:
             stage = h["frames/stage"][:]
         with open(en) as f:
@@ -270,8 +275,6 @@ def report(run: Path) -> dict:
         i = d["stress_ratio_smoothed"].idxmax()
         out["peak_stress_ratio_smoothed_at"] = [float(d["stress_ratio_smoothed"][i]), float(d["axial_strain"][i])]
     if (run / "frames.h5").exists() and (run / "case.yaml").exists():
-        from orchestrator.case import load_case
-        from orchestrator.stability.observables import observables
         out["observables"] = observables(load_case(run / "case.yaml"), run)
     return out
 

@@ -226,6 +226,10 @@ def test_liggghts_triaxial_with_clumps(tmp_path):
         zt = f["walls/platen_top/position"][:, 2]
         wstep = np.rint(f["walls/platen_top/time"][:] / json.loads((rd / "params.json").read_text())["dt"])
     assert pos.shape[0] >= 4 and not np.isnan(pos).any()
+    # the void ratio when loading begins is measured inside the sample too (the members' union:
+    # test_triaxial_summary checks it on a lattice of overlapping pairs), as seed 001 measures it by CT
+    e = json.loads((rd / "scene_summary.json").read_text())["isotropic_end"]["void_ratio"]
+    assert e["interior"] is not None and 0.2 < e["interior_solid_fraction"] < 0.74, e
     # number of clumps and members as asked, per template (shape x size class)
     assert len(np.unique(owner[:, 1])) == case.scene.grains == C["count"]
     assert len(owner) == len(pid) == C["members"]

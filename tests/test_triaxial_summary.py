@@ -72,7 +72,26 @@ def test_void_ratio_of_a_lattice_sample():
     assert e["hull"] > e["interior"] and e["boundary"] > e["hull"]
     cells = len(pos) * (2 * r) ** 3
     assert abs(void_ratios(pos, rad, vs, cells, cells, 0.0, H, 2 * r)["boundary"] - lattice) < 1e-12
-    assert void_ratios(pos, rad, vs, cells, vh, 0.0, H, 2 * r, spheres=False)["interior"] is None
+
+
+def test_interior_void_ratio_of_a_clump_lattice_counts_overlapping_members_once():
+    """A cubic lattice (cell L) of two-sphere clumps (radius a, centres d apart, overlapping): the
+    interior solid fraction is the clumps' union volume over L³, V = 2·(4/3)πa³ - π(4a + d)(2a - d)²/12
+    (the lens of two equal spheres), not the members' summed volume."""
+    from orchestrator.scenes.triaxial import hull_volume, void_ratios
+    a, d, L, R, H = 1.0, 1.0, 3.2, 16.0, 32.0
+    g = np.arange(-R, R + 1e-9, L)
+    x, y, z = np.meshgrid(g, g, np.arange(L / 2, H - L / 2 + 1e-9, L), indexing="ij")
+    c = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    c = c[np.hypot(c[:, 0], c[:, 1]) <= R - L / 2]
+    pos = np.concatenate([c - [d / 2, 0, 0], c + [d / 2, 0, 0]])
+    rad = np.full(len(pos), a)
+    union = 2 * 4 / 3 * np.pi * a ** 3 - np.pi * (4 * a + d) * (2 * a - d) ** 2 / 12
+    vs = union * len(c)
+    e = void_ratios(pos, rad, vs, np.pi * R ** 2 * H, hull_volume(pos, rad, 0.0, H), 0.0, H, 2 * a)
+    phi = union / L ** 3
+    assert abs(e["interior_solid_fraction"] - phi) < 0.03 * phi, (e, phi)
+    assert e["interior_solid_fraction"] < 2 * 4 / 3 * np.pi * a ** 3 / L ** 3 * 0.9     # not the summed members
 
 
 def test_slab_hull_follows_a_neck_the_convex_hull_bridges():

@@ -60,6 +60,7 @@ from ..atomic import write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
 from ..derive import DerivationError
+from ..frames import load as load_frames
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
 from ..psd import Cylinder, lognormal_mu_for_mean, relax_overlaps, truncated_lognormal
@@ -941,21 +942,22 @@ def _solid_volume(sc: dict, r: np.ndarray) -> float | None:
 
 
 def void_ratios(pos: np.ndarray, r: np.ndarray, solid_volume: float, volume_boundary: float,
-                volume_hull: float, z_bottom: float, z_top: float, d50: float, spheres: bool = True) -> dict:
+                volume_hull: float, z_bottom: float, z_top: float, d50: float) -> dict:
     """Void ratio e = V_voids / V_solid [-] of the sample three ways: inside the lateral boundary
     (``boundary``: the membrane's or shell's volume between the platens), inside the grains' convex
     hull (``hull``), and in an interior measurement cylinder (``interior``: radius 0.6 R with R the
     hull's equivalent radius, 2 d50 clear of each platen; the solid fraction is the fraction of a
-    regular grid of points, d50/6 apart, that lie inside a sphere, as a CT void ratio counts voxels;
-    spheres only, None for clumps). The first two include the voids along the boundary, which a CT
-    void ratio of the specimen's interior does not (seed 001 §2: e = 0.593 before loading).
-    ``solid_volume`` [m³]: :func:`_solid_volume`."""
+    regular grid of points, d50/6 apart, that lie inside a sphere, as a CT void ratio counts voxels).
+    The first two include the voids along the boundary, which a CT void ratio of the specimen's
+    interior does not (seed 001 §2: e = 0.593 before loading). ``pos``, ``r``: the spheres, or a
+    clump sample's member spheres (the grid counts a point inside overlapping members once, so the
+    interior figure is the clumps' own). ``solid_volume`` [m³]: :func:`_solid_volume`."""
     out = {"boundary": volume_boundary / solid_volume - 1, "hull": volume_hull / solid_volume - 1, "interior": None,
            "solid_volume": solid_volume}
     ok = ~np.isnan(pos).any(axis=1)
     H = z_top - z_bottom
     lo, hi = z_bottom + 2 * d50, z_top - 2 * d50
-    if not spheres or hi <= lo or not ok.any():
+    if hi <= lo or not ok.any():
         return out
     pos, r = pos[ok], r[ok]
     rc = 0.6 * np.sqrt(volume_hull / (np.pi * H))
@@ -966,17 +968,67 @@ def void_ratios(pos: np.ndarray, r: np.ndarray, solid_volume: float, volume_boun
     disk = np.hypot(X, Y).ravel() < rc
     xy = np.column_stack([X.ravel()[disk], Y.ravel()[disk]])
     tree = cKDTree(pos)
-    k = min(len(pos), 24)                                 # a point in a sphere: one of its 24 nearest centres (PSD 1:3.4)
     solid = 0
     for z in gz:                                          # one layer of points at a time
         pts = np.column_stack([xy, np.full(len(xy), z)])
-        dist, idx = tree.query(pts, k=k)
-        dist, idx = dist.reshape(len(pts), k), idx.reshape(len(pts), k)
-        solid += int(np.count_nonzero((dist < r[idx]).any(axis=1)))
+        solid += int(np.count_nonzero(_inside_any_sphere(tree, r, pts)))
     phi = solid / (len(xy) * len(gz))
     out["interior"] = 1 / phi - 1 if phi > 0 else None
     out["interior_solid_fraction"] = phi
     return out
+
+
+def _void_ratios_at(sc: dict, series: dict, j: int, pos: np.ndarray, r: np.ndarray, volume_hull: float) -> dict | None:
+    """:func:`void_ratios` of the frame at series row ``j`` (positions ``pos``, radii ``r``, hull
+    volume [m³]) with the scene's numbers ``sc``; None without a solid volume."""
+    vs = _solid_volume(sc, r)
+    if not vs:
+        return None
+    return void_ratios(pos, r, vs, float(series["volume"][j]), volume_hull, float(series["z_bottom"][j]),
+                       float(series["z_top"][j]), float(sc["d50"]))
+
+
+def void_ratios_at_loading(run_dir: Path) -> dict | None:
+    """:func:`void_ratios` when loading begins (the frame nearest the end of stage 1) of a run with
+    its ``frames.h5``, computed again from its files: what ``scene_summary.json``'s
+    ``isotropic_end.void_ratio`` holds, for runs post-processed before their grains' interior figure
+    was counted (clump samples until 28 Nov 2026). None without frames or a stage 1."""
+    run_dir = Path(run_dir)
+    if not (run_dir / "frames.h5").exists():
+        return None
+    sc = json.loads((run_dir / "params.json").read_text())["scene"]
+    s = read_series(run_dir)
+    a = analyse(s, sc["pressure"])
+    if a["k0"] <= 0:
+        return None
+    fr = load_frames(run_dir / "frames.h5")
+    k0 = int(np.argmin(np.abs(np.asarray(fr.step, dtype=float) - s["step"][a["k0"]])))
+    pos, r = fr[k0].position, np.asarray(fr.radius, dtype=float)
+    j0 = a["k0"]
+    vh = hull_volume(pos, r, float(s["z_bottom"][j0]), float(s["z_top"][j0]))
+    return _void_ratios_at(sc, s, j0, pos, r, vh)
+
+
+def _inside_any_sphere(tree: cKDTree, r: np.ndarray, pts: np.ndarray, k: int = 24) -> np.ndarray:
+    """Whether each point of ``pts`` (m, 3) lies inside at least one sphere (centres in ``tree``,
+    radii ``r``). Only centres within the largest radius can hold a point: each point's ``k`` nearest
+    such centres are tested, and the points whose k-th nearest is still that close are asked again
+    with 2k, until none is left out (a clump's overlapping members crowd more centres near a point
+    than a sphere packing does)."""
+    r_max = float(r.max())
+    radius = np.append(r, 0.0)                            # index n: no centre within r_max
+    inside = np.zeros(len(pts), bool)
+    todo = np.arange(len(pts))
+    while len(todo):
+        kk = min(k, tree.n)
+        dist, idx = tree.query(pts[todo], k=kk, distance_upper_bound=r_max)
+        dist, idx = dist.reshape(len(todo), kk), idx.reshape(len(todo), kk)
+        inside[todo] = (dist < radius[idx]).any(axis=1)
+        crowded = ~inside[todo] & np.isfinite(dist[:, -1])
+        if kk >= tree.n or not crowded.any():
+            break
+        todo, k = todo[crowded], 2 * kk
+    return inside
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1087,12 +1139,9 @@ def compute_extras(run_dir: Path, params: dict, frame_steps: np.ndarray, positio
                                  "converged": bool(abs(s1i / p - 1) < sc["iso"]["tolerance"]
                                                    and abs(s3i / p - 1) < sc["iso"]["tolerance"])}
         # the void ratio when loading begins (the frame at the end of stage 1), seed 001 §2: 0.593 (CT)
-        j0 = a["k0"]
-        vs = _solid_volume(sc, np.asarray(r, dtype=float))
-        if vs:
-            summ["isotropic_end"]["void_ratio"] = void_ratios(
-                positions(k0), np.asarray(r, dtype=float), vs, float(s["volume"][j0]), float(vh[k0]),
-                float(s["z_bottom"][j0]), float(s["z_top"][j0]), float(sc["d50"]), spheres=not sc.get("clumps"))
+        e = _void_ratios_at(sc, s, a["k0"], positions(k0), np.asarray(r, dtype=float), float(vh[k0]))
+        if e:
+            summ["isotropic_end"]["void_ratio"] = e
     if shear.any():
         # lateral stress stray during shear, on averages over one series window of 10 rows
         e3 = a["sigma3"][shear] / p - 1
