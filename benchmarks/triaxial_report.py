@@ -5,7 +5,7 @@
 For each run: the end of stage 1 (scene_summary.json, or the engine log of a run still going), the
 drag removal (ramp start and drag-off step from the engine log), the fastest grain and the number of
 grains above 1 m/s in every frame from the drag-off frame on (frames.h5; for a YADE run still going,
-its dump/chunk.*.npz), and once the run is complete the loading figures: σ3 stray (largest |σ3/p - 1|
+its dump/chunk.*.npz; a clump sample's grain is its clump, at its fastest member's speed), and once the run is complete the loading figures: σ3 stray (largest |σ3/p - 1|
 of 10-row means), the largest |ε_v(boundary) - ε_v(hull)| for the convex hull and the stacked-slab hull, K'/U (non-affine kinetic over Hertz
 elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3, ε_v at
 ε_a = 1, 2, 5, 10, 15 % (orchestrator.stability.observables, the source of the crossval numbers).
@@ -42,13 +42,15 @@ def _log_steps(log: str, pattern: str) -> list[int]:
 
 
 def _frames(run: Path):
-    """(steps, speeds (frames, grains), stage or None) from frames.h5, else from YADE's dump chunks."""
+    """(steps, speeds (frames, grains), stage or None) from frames.h5, else from YADE's dump chunks.
+    A clump sample's grain is its clump: its speed is that of its fastest member (``clumps.txt``)."""
     if (run / "frames.h5").exists():
         with h5py.File(run / "frames.h5") as h:
             v = h["frames/velocity"][:]
             st = h["frames/step"][:]
             stage = h["frames/stage"][:] if "frames/stage" in h["frames"] else None
-        return st, np.linalg.norm(v, axis=2), stage
+            ids = h["particles/id"][:]
+        return st, _per_grain(run, ids, np.linalg.norm(v, axis=2)), stage
     files = sorted(glob.glob(str(run / "dump" / "chunk.*.npz")))
     if not files:
         return np.zeros(0), np.zeros((0, 0)), None
@@ -57,7 +59,21 @@ def _frames(run: Path):
         z = np.load(f)
         st.append(z["iter"])
         sp.append(np.linalg.norm(z["velocity"], axis=2))
-    return np.concatenate(st), np.concatenate(sp), None
+    ids = np.loadtxt(run / "particles.txt", ndmin=2, comments="#")[:, 0].astype(int)   # YADE's dump order
+    return np.concatenate(st), _per_grain(run, ids, np.concatenate(sp)), None
+
+
+def _per_grain(run: Path, ids: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+    """``speeds`` (frames, particles with ``ids``) per grain: unchanged for spheres; for a clump sample
+    (``clumps.txt``: member id, clump) the largest member speed of each clump, so that "grains above
+    1 m/s" counts clumps, not their member spheres."""
+    if not (run / "clumps.txt").exists():
+        return speeds
+    owner = dict(np.loadtxt(run / "clumps.txt", ndmin=2, comments="#").astype(int).tolist())
+    clump = np.array([owner[int(i)] for i in ids])
+    order = np.argsort(clump, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(clump[order]) != 0])
+    return np.maximum.reduceat(speeds[:, order], starts, axis=1)
 
 
 def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floor: float = 0.01,
