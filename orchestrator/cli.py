@@ -147,10 +147,15 @@ def cmd_clock(args) -> int:
                   "its summary.json says complete and it was not resumed); nothing written", file=sys.stderr)
             return 2
         out = package_table_path() if args.package else user_table_path()
-        fitted = refresh(args.runs, out)
-        n = sum(tp.runs for scenes in fitted.values() for tp in scenes.values())
-        con.print(f"fitted {sum(len(v) for v in fitted.values())} engine/scene model(s) from {n} complete run(s); "
-                  f"wrote {out}")
+        fitted = refresh(args.runs, out, steps_only=args.steps_only)
+        if args.steps_only:
+            con.print(f"refreshed the step plans of {sum(len(v) for v in fitted.values())} engine/scene model(s) "
+                      f"({', '.join(f'{e} {k}: {tp.units:g} units' for e, v in fitted.items() for k, tp in v.items())}); "
+                      f"wrote {out}")
+        else:
+            n = sum(tp.runs for scenes in fitted.values() for tp in scenes.values())
+            con.print(f"fitted {sum(len(v) for v in fitted.values())} engine/scene model(s) from {n} complete run(s); "
+                      f"wrote {out}")
     t = Table(title="run-time model: t = startup + steps (a + b n^α) / (1 + e (workers - 1))")
     for col in ("engine", "scene", "startup [s]", "a [µs/step]", "b [ns/(particle^α step)]", "α", "e", "runs", "note"):
         t.add_column(col)
@@ -302,6 +307,9 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     ck.add_argument("runs", nargs="*", default=["runs"], help="run directories or runs/ trees (refresh)")
     ck.add_argument("--package", action="store_true",
                     help="write the shipped table benchmarks/throughput.json (in a checkout) instead of the user table")
+    ck.add_argument("--steps-only", action="store_true",
+                    help="refresh only how many steps the runs took (the same on every machine), keeping the "
+                         "table's costs per step (fitted on its own machine)")
     ck.set_defaults(func=cmd_clock)
 
     vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")

@@ -53,6 +53,7 @@ import json
 import math
 import os
 import platform
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -645,17 +646,33 @@ def fit(samples: list[RunSample]) -> Throughput:
     return Throughput(startup, float(a), float(b), eff, len(samples), note, med_units, alpha)
 
 
-def refresh(paths, out: Path | None = None) -> dict:
+def refresh(paths, out: Path | None = None, steps_only: bool = False) -> dict:
     """Refit the table from the complete runs under ``paths`` and write it (default: the user
-    table, :func:`user_table_path`). Returns ``{engine: {scene: Throughput}}`` of what was fitted."""
+    table, :func:`user_table_path`). Returns ``{engine: {scene: Throughput}}`` of what was fitted.
+
+    ``steps_only``: refresh only how many steps the runs took (the step plan's ``units``, the same
+    on every machine: e.g. a new stage-1 servo law that converges in fewer chunks) of the entries
+    already in the table, and keep the costs per step it was fitted with on its machine (the other
+    machines' speed records are ratios to them). Returns the entries changed."""
     groups: dict = {}
     for s in samples_from_runs(paths):
         groups.setdefault((s.engine, s.scene), []).append(s)
-    fitted: dict = {}
-    for (eng, sc), smp in sorted(groups.items()):
-        fitted.setdefault(eng, {})[sc] = fit(smp)
     out = Path(out) if out else user_table_path()
     old = json.loads(out.read_text()) if out.is_file() else {}
+    fitted: dict = {}
+    for (eng, sc), smp in sorted(groups.items()):
+        if not steps_only:
+            fitted.setdefault(eng, {})[sc] = fit(smp)
+            continue
+        units = [x.units for x in smp if x.units is not None]
+        entry = (old.get(eng) or {}).get(sc)
+        if not units or not entry:
+            continue
+        med = float(np.median(units))
+        entry["units"] = med
+        entry["note"] = (re.sub(r"; [\d.e+-]+ units \(median of \d+\)", "", entry.get("note", ""))
+                         + f"; {med:g} units (median of {len(units)}, steps refreshed alone)")
+        fitted.setdefault(eng, {})[sc] = Throughput(**entry)
     for eng, scenes in fitted.items():
         old.setdefault(eng, {}).update({sc: asdict(tp) for sc, tp in scenes.items()})
     out.parent.mkdir(parents=True, exist_ok=True)

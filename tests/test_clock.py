@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -174,6 +175,26 @@ def test_triaxial_estimate_takes_the_chunks_measured_runs_took(tmp_path, monkeyp
     assert size["engine_time_s"] == pytest.approx(fitted.engine_time(300, size["steps_expected"]))
     assert size["engine_time_s"] < 0.7 * fitted.engine_time(300, size["steps"])
 
+
+def test_steps_only_refresh_keeps_the_costs_per_step(tmp_path, monkeypatch):
+    """``clock refresh --steps-only``: a new stage-1 law changes how many steps a run takes, the same
+    on every machine, not what a step costs on the machine the table was fitted on (the other
+    machines' speed records are ratios to those costs): the units become the new runs' median, the
+    costs stay; an entry the table lacks is not created."""
+    runs = tmp_path / "runs"
+    for name, k in (("a", 3), ("b", 4), ("c", 6)):
+        plan, _ = _triaxial_run(runs, name, k)
+    table = tmp_path / "throughput.json"
+    old = Throughput(2.0, 1e-3, 5e-6, 0.7, 9, "3 sizes; 12 units (median of 9)", 12.0)
+    table.write_text(json.dumps({"yade": {"triaxial": asdict(old)}}))
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(table))
+    new = refresh([runs], table, steps_only=True)["yade"]["triaxial"]
+    assert new.units == pytest.approx(4.0 * plan.unit / plan.scale)
+    assert (new.startup_s, new.per_step_s, new.per_particle_step_s, new.runs) == (2.0, 1e-3, 5e-6, 9)
+    assert new.note.count("units") == 1 and "steps refreshed alone" in new.note
+    assert load_table()["yade"]["triaxial"] == new
+    table.write_text("{}")
+    assert refresh([runs], table, steps_only=True) == {} and json.loads(table.read_text()) == {}
 
 def test_stage_one_is_learned_in_its_own_time_scale_not_in_chunks():
     """The triaxial's chunk is two frame intervals of the loading: halving the loading rate doubles
