@@ -27,6 +27,8 @@ import h5py
 import numpy as np
 import pandas as pd
 
+from engines.lammps_dump import read_binary_dump
+from engines.liggghts.segments import dump_segments
 from orchestrator.analysis.triaxial import triaxial_curves
 from orchestrator.case import load_case
 from orchestrator.frames import Frames
@@ -42,7 +44,8 @@ def _log_steps(log: str, pattern: str) -> list[int]:
 
 
 def _frames(run: Path):
-    """(steps, speeds (frames, grains), stage or None) from frames.h5, else from YADE's dump chunks.
+    """(steps, speeds (frames, grains), stage or None) from frames.h5, else from YADE's dump chunks or
+    LIGGGHTS' binary dump segments (a run still going).
     A clump sample's grain is its clump: its speed is that of its fastest member (``clumps.txt``)."""
     if (run / "frames.h5").exists():
         with h5py.File(run / "frames.h5") as h:
@@ -52,6 +55,20 @@ def _frames(run: Path):
             ids = h["particles/id"][:]
         return st, _per_grain(run, ids, np.linalg.norm(v, axis=2)), stage
     files = sorted(glob.glob(str(run / "dump" / "chunk.*.npz")))
+    if not files and (run / "dump" / "columns.json").exists():       # LIGGGHTS, still going: its binary dumps
+        cols = json.loads((run / "dump" / "columns.json").read_text())
+        st, sp, seen = [], [], set()
+        for step, a in read_binary_dump(dump_segments(run), len(cols)):
+            if step in seen:                                           # a segment's first frame, written twice
+                continue
+            seen.add(step)
+            a = a[np.argsort(a[:, cols.index("id")])]
+            st.append(step)
+            sp.append(np.linalg.norm(a[:, [cols.index(c) for c in ("vx", "vy", "vz")]], axis=1))
+            ids = a[:, cols.index("id")].astype(int)
+        if not st:
+            return np.zeros(0), np.zeros((0, 0)), None
+        return np.array(st), _per_grain(run, ids, np.array(sp)), None
     if not files:
         return np.zeros(0), np.zeros((0, 0)), None
     st, sp = [], []

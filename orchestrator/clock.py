@@ -439,7 +439,9 @@ def _sample(run_dir: Path) -> RunSample | None:
     if not isinstance(wt.get("engine"), (int, float)):
         return None
     sc = p.get("scene") or {}
-    n = int(s.get("n_particles") or sc.get("n") or len(sc.get("ids") or []) or 0)
+    # the spheres the engine integrated, as the estimate counts them (sizing.integrated_particles):
+    # a clump sample's member spheres (``n_spheres``), not its grains (summary.json's n_particles)
+    n = int(sc.get("n_spheres") or s.get("n_particles") or sc.get("n") or len(sc.get("ids") or []) or 0)
     steps = int(s.get("steps_run") or s.get("steps") or 0)
     if n <= 0 or steps <= 0:
         return None

@@ -69,6 +69,23 @@ def test_refresh_from_run_directories(tmp_path, monkeypatch):
     assert load_table()["liggghts"]["plane_shear"] == tp
 
 
+def test_a_clump_run_is_counted_by_its_member_spheres(tmp_path):
+    """The estimate sizes a clump sample by the spheres the engine integrates (the members,
+    ``n_spheres``; sizing.integrated_particles); a run's sample must count the same, not the grains
+    its summary.json names (a 300-clump probe recorded as 300 particles read 1.50 of the table, as
+    its 2 400 members 0.38, and the next dry run was 4x too long)."""
+    from orchestrator.clock import _sample
+    d = tmp_path / "liggghts-0"
+    d.mkdir()
+    (d / "summary.json").write_text(json.dumps({
+        "engine": "liggghts", "status": "complete", "steps": 1000, "steps_run": 1000, "n_particles": 300,
+        "wall_time": {"engine": 10.0, "engine_loop": 9.0}}))
+    (d / "params.json").write_text(json.dumps({"scene": {"n": 300, "n_spheres": 2400}}))
+    (d / "case.yaml").write_text("scene: {kind: triaxial, particles: {shape: clumps}}\n"
+                                 "contact: {substitutes: {liggghts.membrane: shell_pressure}}\n")
+    smp = _sample(d)
+    assert smp.n_particles == 2400 and smp.scene == "triaxial:shell_pressure+clumps"
+
 def test_multi_rank_runs_alone_keep_the_assumed_efficiency():
     from orchestrator.clock import ASSUMED_PARALLEL_EFFICIENCY
     tp = fit(_runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=ASSUMED_PARALLEL_EFFICIENCY))
