@@ -65,10 +65,13 @@ def _frames(run: Path):
             a = a[np.argsort(a[:, cols.index("id")])]
             st.append(step)
             sp.append(np.linalg.norm(a[:, [cols.index(c) for c in ("vx", "vy", "vz")]], axis=1))
-            ids = a[:, cols.index("id")].astype(int)
+            # a clump's members carry its body id in "mol" (fix multisphere); clumps.txt maps the
+            # orchestrator's placed ids until the run's end rewrites it from the frames
+            body = a[:, cols.index("mol")].astype(int) if "mol" in cols else None
         if not st:
             return np.zeros(0), np.zeros((0, 0)), None
-        return np.array(st), _per_grain(run, ids, np.array(sp)), None
+        sp = np.array(st), np.array(sp)
+        return sp[0], (sp[1] if body is None else _max_per_group(body, sp[1])), None
     if not files:
         return np.zeros(0), np.zeros((0, 0)), None
     st, sp = [], []
@@ -87,10 +90,14 @@ def _per_grain(run: Path, ids: np.ndarray, speeds: np.ndarray) -> np.ndarray:
     if not (run / "clumps.txt").exists():
         return speeds
     owner = dict(np.loadtxt(run / "clumps.txt", ndmin=2, comments="#").astype(int).tolist())
-    clump = np.array([owner[int(i)] for i in ids])
-    order = np.argsort(clump, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(clump[order]) != 0])
-    return np.maximum.reduceat(speeds[:, order], starts, axis=1)
+    return _max_per_group(np.array([owner[int(i)] for i in ids]), speeds)
+
+
+def _max_per_group(group: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(frames, particles) ``values`` reduced to their largest per ``group`` label (particles,)."""
+    order = np.argsort(group, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(group[order]) != 0])
+    return np.maximum.reduceat(values[:, order], starts, axis=1)
 
 
 def volume_methods(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15, 0.20), floor: float = 0.01,
