@@ -69,7 +69,7 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
            "samples_from_runs", "fit",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
-           "speed_ratio", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
+           "speed_ratio", "run_engine_seconds", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
@@ -425,6 +425,26 @@ def engine_seconds(summary: dict) -> float | None:
     if isinstance(cpu, (int, float)) and cpu > 0 and max(int(summary.get("workers") or 1), 1) == 1:
         return min(float(cpu), float(wall))
     return float(wall)
+
+
+def run_engine_seconds(run_dir, summary: dict | None = None) -> float | None:
+    """The whole run's engine time as a quiet machine would have taken it [s]: :func:`engine_seconds`
+    of its ``summary.json``, or for a run that was resumed (its summary times the last attempt only)
+    the cost of an uninterrupted run from the record of every attempt
+    (:func:`orchestrator.attempts.run_cost`); None without either. ``summary``: the run's summary,
+    if already read. What ladders and sweeps put beside each run (a rung killed and resumed read
+    115 s for its last attempt where it had cost ~1 300 s)."""
+    run_dir = Path(run_dir)
+    if summary is None:
+        try:
+            summary = json.loads((run_dir / "summary.json").read_text())
+        except (OSError, ValueError):
+            return None
+    if not summary.get("resumed_from"):
+        return engine_seconds(summary)
+    steps = int(summary.get("steps_run") or summary.get("steps") or 0)
+    ranks = max(int(summary.get("workers") or 1), 1)
+    return run_cost(summary.get("attempts") or read_attempts(run_dir), steps, use_cpu=ranks == 1)
 
 
 def _sample(run_dir: Path) -> RunSample | None:

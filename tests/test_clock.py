@@ -86,6 +86,23 @@ def test_a_clump_run_is_counted_by_its_member_spheres(tmp_path):
     smp = _sample(d)
     assert smp.n_particles == 2400 and smp.scene == "triaxial:shell_pressure+clumps"
 
+def test_a_resumed_runs_engine_time_sums_its_attempts(tmp_path):
+    """A ladder or sweep puts each run's engine time beside its observables: for a run killed and
+    resumed, whose summary.json times its last attempt only, the cost of the whole run from its
+    attempts' record (YADE's 2x rung of the small shear cell's stiffness ladder, session 20: its
+    summary said 115 s of CPU, its two attempts 974 s and 115 s, of which 7 000 steps ran twice)."""
+    from orchestrator.clock import run_engine_seconds
+    d = tmp_path / "yade-0"
+    d.mkdir()
+    attempts = [{"first_step": 0, "last_step": 427064, "cpu_s": 974.154931, "wall_s": 2116.1, "done": False},
+                {"first_step": 420101, "last_step": 464293, "cpu_s": 114.79449, "wall_s": 200.2, "done": True}]
+    summary = {"status": "complete", "steps_run": 464293, "resumed_from": 420101, "attempts": attempts,
+               "wall_time": {"engine": 200.2, "engine_cpu": 114.79449}}
+    (d / "summary.json").write_text(json.dumps(summary))
+    whole = 974.154931 + 114.79449 * (464293 - 427064) / (464293 - 420101)
+    assert run_engine_seconds(d) == pytest.approx(whole)
+    assert run_engine_seconds(d, {k: v for k, v in summary.items() if k != "resumed_from"}) == pytest.approx(114.79449)
+
 def test_multi_rank_runs_alone_keep_the_assumed_efficiency():
     from orchestrator.clock import ASSUMED_PARALLEL_EFFICIENCY
     tp = fit(_runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=ASSUMED_PARALLEL_EFFICIENCY))

@@ -13,7 +13,7 @@ from abc import ABC, abstractmethod
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterable, Iterator
 from ..case import load_case
-from ..clock import engine_seconds
+from ..clock import run_engine_seconds
 from ..runner import run_case
 from .observables import observables
 from ..registry import get_engine
@@ -32,7 +32,7 @@ def run_task(task: dict) -> dict:
         out = run_case(case, task["engine"], runs_root=task["runs_root"], force=task.get("force", False),
                        progress=False, analyze=task.get("analyze", False))
         res = {"status": out.status, "run_dir": str(out.run_dir), "reused": out.reused,
-               "engine_time": engine_seconds(out.summary),
+               "engine_time": run_engine_seconds(out.run_dir, out.summary),
                "total_time": out.summary.get("wall_time", {}).get("total"),
                "unstable": out.summary.get("unstable"), "dt": out.summary.get("dt"),
                "dt_fraction": out.summary.get("dt_fraction")}

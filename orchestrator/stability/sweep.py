@@ -21,7 +21,7 @@ import yaml
 
 from ..atomic import write_json, write_text
 from ..case import CaseError, load_case
-from ..clock import engine_seconds
+from ..clock import run_engine_seconds
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
 from .observables import observables
@@ -89,7 +89,7 @@ def _finished(task: dict) -> dict:
     """The result of a run that is already there (no engine started)."""
     s = read_summary(task["run_dir"])
     res = {"status": s["status"], "run_dir": task["run_dir"], "reused": True,
-           "engine_time": engine_seconds(s), "total_time": s.get("wall_time", {}).get("total"),
+           "engine_time": run_engine_seconds(task["run_dir"], s), "total_time": s.get("wall_time", {}).get("total"),
            "unstable": s.get("unstable"), "dt": s.get("dt"), "dt_fraction": s.get("dt_fraction")}
     if s["status"] == "complete":
         try:
