@@ -489,7 +489,7 @@ def _sample(run_dir: Path) -> RunSample | None:
     if s.get("resumed_from"):
         # the summary's engine time covers only the last attempt: the record of every attempt
         # (orchestrator.attempts) gives the whole run's, or the run does not count
-        cost = run_cost(attempts, steps, use_cpu=ranks == 1)
+        cost = run_engine_seconds(run_dir, s)
         if cost is None:
             return None
         return RunSample(s["engine"], key, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,

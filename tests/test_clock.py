@@ -86,6 +86,7 @@ def test_a_clump_run_is_counted_by_its_member_spheres(tmp_path):
     smp = _sample(d)
     assert smp.n_particles == 2400 and smp.scene == "triaxial:shell_pressure+clumps"
 
+
 def test_a_resumed_runs_engine_time_sums_its_attempts(tmp_path):
     """A ladder or sweep puts each run's engine time beside its observables: for a run killed and
     resumed, whose summary.json times its last attempt only, the cost of the whole run from its
@@ -102,6 +103,7 @@ def test_a_resumed_runs_engine_time_sums_its_attempts(tmp_path):
     whole = 974.154931 + 114.79449 * (464293 - 427064) / (464293 - 420101)
     assert run_engine_seconds(d) == pytest.approx(whole)
     assert run_engine_seconds(d, {k: v for k, v in summary.items() if k != "resumed_from"}) == pytest.approx(114.79449)
+
 
 def test_multi_rank_runs_alone_keep_the_assumed_efficiency():
     from orchestrator.clock import ASSUMED_PARALLEL_EFFICIENCY
@@ -229,6 +231,7 @@ def test_steps_only_refresh_keeps_the_costs_per_step(tmp_path, monkeypatch):
     assert load_table()["yade"]["triaxial"] == new
     table.write_text("{}")
     assert refresh([runs], table, steps_only=True) == {} and json.loads(table.read_text()) == {}
+
 
 def test_stage_one_is_learned_in_its_own_time_scale_not_in_chunks():
     """The triaxial's chunk is two frame intervals of the loading: halving the loading rate doubles
