@@ -7,6 +7,8 @@ For every complete, un-resumed run it prints the engine time the model predicts 
 (:mod:`orchestrator.clock`; for a triaxial, whose stage 1 goes on until it converges, from the
 stage-1 chunks the engine's other runs took, not from the chunks this run took) in two ways:
 
+- ``expected``: the steps the table expects the run to take (a triaxial's stage 1 from the units
+  its entry learned: ``clock refresh --steps-only``), beside the ``steps`` it took;
 - ``table``: with the shipped/user table as it is (what ``validate`` and ``run --dry-run`` print);
 - ``leave-one-out``: refitted on the *other* runs of the same engine and scene, so a run never
   predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind);
@@ -34,7 +36,7 @@ from pathlib import Path
 from orchestrator.case import load_case
 
 from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_factor,
-                                speed_ratio)
+                                speed_ratio, table_entry)
 from orchestrator.runner import run_case
 from orchestrator.scenes.triaxial import stage1_problems
 from engines.base import UnsupportedFeature
@@ -63,7 +65,7 @@ def main(argv=None) -> int:
         roots.append(root)
     samples = samples_from_runs(roots)
     table = load_table()
-    print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'w':>2s} {'actual s':>9s} "
+    print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'expected':>9s} {'w':>2s} {'actual s':>9s} "
           f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'machine':>7s} {'load':>9s}  run")
     package = _package()
     ratio_of = {s.source: speed_ratio(s, package) for s in samples}     # each run's speed, read once
@@ -95,7 +97,9 @@ def main(argv=None) -> int:
             if not (s.shared or off_plan):
                 machine_err["kept"] = max(machine_err["kept"] or 0.0, abs(r3 - 1))
         load = "-" if s.load is None else f"{s.load:.1f}/{s.cores}"
-        print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {s.ranks:2d} {s.engine_s:9.1f} "
+        # the steps the table expects this run to take (the plan's units: clock refresh --steps-only)
+        expected = expected_steps(budget, s.plan, table_entry(table.get(s.engine, {}), s.scene))
+        print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {expected:9d} {s.ranks:2d} {s.engine_s:9.1f} "
               f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {r3:7.2f} {load:>9s}  {Path(s.source).name}"
               + ("  shared" if s.shared else "") + ("  off-plan" if off_plan else ""))
     print("largest leave-one-out error: " + (f"{100 * worst:.0f} % (floor: 30 %)" if worst is not None
