@@ -13,6 +13,8 @@ elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3
 volume change, by phase (full drag, ramp, drag-free): whether the drag-supported sample comes to
 rest or creeps. ``stage1_solid_fraction``: (step, height [mm], solid fraction, σ1/p) at 12 rows of
 stage 1 from ``triax.txt`` (a drag-held sample reads σ1 ≈ p while it still compacts).
+``attempts_pace``: each attempt's steps per CPU second. ``latest_frame`` (a run still going): the
+void ratios and the solid fraction in 10 rings about the axis of its last frame.
 """
 from __future__ import annotations
 
@@ -32,8 +34,9 @@ from engines.liggghts.segments import dump_segments
 from orchestrator.analysis.triaxial import triaxial_curves
 from orchestrator.case import load_case
 from orchestrator.frames import Frames
-from orchestrator.scenes.triaxial import (SLAB_HULL_D50, _solid_volume, analyse, read_series, slab_hull_volume,
-                                          void_ratios_at_loading)
+from orchestrator.attempts import read_attempts
+from orchestrator.scenes.triaxial import (SLAB_HULL_D50, _solid_volume, _void_ratios_at, analyse, hull_volume, read_series,
+                                          slab_hull_volume, solid_fraction_profile, void_ratios_at_loading)
 from orchestrator.stability.observables import observables
 
 FLOOR = 1.0          # m/s, issue #14: no grain above 1 m/s in the frame after the drag goes off
@@ -70,8 +73,8 @@ def _frames(run: Path):
             body = a[:, cols.index("mol")].astype(int) if "mol" in cols else None
         if not st:
             return np.zeros(0), np.zeros((0, 0)), None
-        sp = np.array(st), np.array(sp)
-        return sp[0], (sp[1] if body is None else _max_per_group(body, sp[1])), None
+        speeds = np.array(sp)
+        return np.array(st), (speeds if body is None else _max_per_group(body, speeds)), None
     if not files:
         return np.zeros(0), np.zeros((0, 0)), None
     st, sp = [], []
@@ -207,7 +210,8 @@ def series_figures(run: Path, strains=(0.01, 0.02, 0.05, 0.10, 0.15), rows: int 
 
 def stage1_speeds(run: Path, log: str, steps: np.ndarray, sp: np.ndarray) -> list:
     """Per stage-1 frame: (step, phase, median and rms grain speed [m/s], fastest [m/s], grains above
-    1 m/s, boundary volume change since the previous frame [-]). phase: "drag" (full drag), "ramp",
+    1 m/s, boundary volume change since the previous frame [-], fraction of grains exactly at rest: a
+    clump that nothing has touched yet, with no gravity). phase: "drag" (full drag), "ramp",
     "free" (drag off, stage 1 going on). Whether the drag-supported sample comes to rest (a static
     packing the drag's removal would not disturb) or creeps at a steady rate."""
     ramp = _log_steps(log, r"^ISO converged with drag: drag ramped to zero over \d+ steps from step (\d+)")
@@ -227,7 +231,8 @@ def stage1_speeds(run: Path, log: str, steps: np.ndarray, sp: np.ndarray) -> lis
         v_prev = v
         s = sp[k]
         rows.append((int(st), phase, round(float(np.median(s)), 4), round(float(np.sqrt(np.mean(s ** 2))), 4),
-                     round(float(s.max()), 2), int((s > FLOOR).sum()), float(f"{dv:.2e}")))
+                     round(float(s.max()), 2), int((s > FLOOR).sum()), float(f"{dv:.2e}"),
+                     round(float(np.mean(s == 0)), 3)))
     return rows
 
 
@@ -249,6 +254,56 @@ def stage1_solid_fraction(run: Path, points: int = 12) -> list:
             for k in iso[np.linspace(0, len(iso) - 1, min(points, len(iso))).astype(int)]]
 
 
+def _latest_frame(run: Path):
+    """(step, positions, radii) of the last frame of a run still going (LIGGGHTS' binary dumps, with
+    their own radius column: during a clump run particles.txt holds the placed packing's ids, not the
+    engine's; YADE's dump chunks, in particles.txt's order); None for a complete run or none yet."""
+    if (run / "frames.h5").exists():
+        return None
+    if (run / "dump" / "columns.json").exists():
+        cols = json.loads((run / "dump" / "columns.json").read_text())
+        last = None
+        for last in read_binary_dump(dump_segments(run)[-2:], len(cols)):
+            pass
+        if last is None:
+            return None
+        step, a = last
+        return int(step), a[:, [cols.index(c) for c in "xyz"]], a[:, cols.index("radius")]
+    files = sorted(glob.glob(str(run / "dump" / "chunk.*.npz")))
+    if not files:
+        return None
+    z = np.load(files[-1])
+    return int(z["iter"][-1]), z["position"][-1], np.loadtxt(run / "particles.txt", ndmin=2, comments="#")[:, 1]
+
+
+def latest_frame(run: Path) -> dict:
+    """For a run still going, its last frame: the void ratios (``void_ratios``: boundary, hull and
+    the CT-like interior) and the solid fraction in 10 rings about the axis (``solid_fraction_profile``)."""
+    lf = _latest_frame(run)
+    if lf is None:
+        return {}
+    step, pos, r = lf
+    sc = json.loads((run / "params.json").read_text())["scene"]
+    s = read_series(run)
+    j = int(np.argmin(np.abs(s["step"] - step)))
+    zb, zt = float(s["z_bottom"][j]), float(s["z_top"][j])
+    e = _void_ratios_at(sc, s, j, pos, r, hull_volume(pos, r, zb, zt)) or {}
+    edges, phi = solid_fraction_profile(pos, r, zb, zt, float(sc["d50"]))
+    return {"step": step, "void_ratio": {k: float(f"{v:.4g}") for k, v in e.items() if v is not None},
+            "solid_fraction_by_ring": [round(float(x), 3) for x in phi], "ring_width_mm": round(float(edges[1]) * 1e3, 3)}
+
+
+def attempts_pace(run: Path) -> list:
+    """Each attempt of the run (attempts.json): (first step, last step, CPU s, steps per CPU second,
+    load): the pace a run still going has kept, which its estimate is checked against."""
+    rows = []
+    for a in read_attempts(run):
+        first, last, cpu = a.get("first_step"), a.get("last_step"), a.get("cpu_s")
+        if isinstance(first, int) and isinstance(last, int) and cpu:
+            rows.append((first, last, round(cpu), round((last - first) / cpu, 1), a.get("load")))
+    return rows
+
+
 def report(run: Path) -> dict:
     run = Path(run)
     log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
@@ -264,6 +319,8 @@ def report(run: Path) -> dict:
         out["drag_off_note"] = "drag switched off at once (no ramp)"
     out["drag_off"] = off
     out["stage1_solid_fraction"] = stage1_solid_fraction(run)      # (step, H [mm], solid fraction, σ1/p)
+    out["attempts_pace"] = attempts_pace(run)          # (first step, last step, CPU s, steps/CPU s, load)
+    out["latest_frame"] = latest_frame(run)            # a run still going: void ratios, rings' solid fraction
     steps, sp, _ = _frames(run)
     if off and len(steps):
         k0 = int(np.searchsorted(steps, off[0] - 1))      # the frame at (or just after) the drag-off step

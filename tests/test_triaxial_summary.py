@@ -3,6 +3,7 @@ taken on running means (the same window as the smoothed σ3 stray), the instanta
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from orchestrator.scenes.triaxial import peak_stress_ratio, running_mean, smoothing_rows
 
@@ -126,3 +127,23 @@ def test_slab_hull_of_one_sphere_converges_to_its_volume():
     pos = np.array([[0.0, 0.0, 0.0], [1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0]])   # a 2-D hull needs 3 sections
     v = slab_hull_volume(pos, np.full(3, a), -a, a, 2 * a / 400)
     assert abs(v / (4 / 3 * np.pi * a ** 3) - 1) < 0.01, v / (4 / 3 * np.pi * a ** 3)
+
+
+def test_solid_fraction_profile_shows_a_crust_round_a_looser_core():
+    """A simple cubic lattice of touching spheres (φ = π/6) in a cylinder reads flat across the rings
+    (within 10 % of π/6: a regular grid on a regular lattice aliases a little, which a random packing
+    does not); with every other sphere taken out of the core (radius < 12 r), the core's rings read
+    half the crust's."""
+    from orchestrator.scenes.triaxial import solid_fraction_profile
+    r, R, H = 1.0, 30.0, 14.0
+    g = np.arange(-R, R + 1e-9, 2 * r)
+    x, y, z = np.meshgrid(g, g, np.arange(r, H - r + 1e-9, 2 * r), indexing="ij")
+    pos = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    pos = pos[np.hypot(pos[:, 0], pos[:, 1]) <= R - r]
+    d50 = 2.1 * r                                   # a grid d50/6 apart, not commensurate with the lattice
+    edges, full = solid_fraction_profile(pos, np.full(len(pos), r), 0.0, H, d50, rings=5)
+    assert len(edges) == 6 and edges[-1] == pytest.approx(np.hypot(pos[:, 0], pos[:, 1]).max())
+    assert np.all(np.abs(full - np.pi / 6) < 0.1 * np.pi / 6) and np.ptp(full) < 0.05 * full.mean(), full
+    core = (np.hypot(pos[:, 0], pos[:, 1]) < 12 * r) & (np.rint((pos.sum(axis=1) - 1) / 2).astype(int) % 2 == 0)
+    _, crust = solid_fraction_profile(pos[~core], np.full(int((~core).sum()), r), 0.0, H, d50, rings=5)
+    assert np.allclose(crust[:2] / full[:2], 0.5, atol=0.03) and np.allclose(crust[3:], full[3:]), crust
