@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_estimate.py [RUNS_TREE ...] [--run CASE ...] [--engine E ...]
 
 With ``--run``, the named cases are first run (or reused) under ``benchmarks/runs-estimate/``.
-For every complete, un-resumed run it prints the engine time the model predicts before the run
+For every complete run (a resumed one costed from its attempts) it prints the engine time the model predicts before the run
 (:mod:`orchestrator.clock`; for a triaxial, whose stage 1 goes on until it converges, from the
 stage-1 chunks the engine's other runs took, not from the chunks this run took) in two ways:
 

@@ -144,7 +144,7 @@ def cmd_clock(args) -> int:
             return 2
         if not samples_from_runs(args.runs):
             print(f"error: clock refresh: no complete run under {', '.join(map(str, args.runs))} (a run counts once "
-                  "its summary.json says complete and it was not resumed); nothing written", file=sys.stderr)
+                  "its summary.json says complete; a resumed run with the record of all its attempts); nothing written", file=sys.stderr)
             return 2
         out = package_table_path() if args.package else user_table_path()
         fitted = refresh(args.runs, out, steps_only=args.steps_only)

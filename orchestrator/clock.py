@@ -579,8 +579,8 @@ def expected_steps(budget: int, plan, tp: Throughput | None) -> int:
 
 
 def samples_from_runs(paths) -> list[RunSample]:
-    """Every complete, un-resumed run under ``paths`` (run directories or runs/ trees), each once: a
-    directory with the name (the run's hash: engine, case, derived numbers, templates) and the
+    """Every complete run under ``paths`` (run directories or runs/ trees; a resumed run costed from
+    its attempts' record, :func:`run_engine_seconds`), each once: a directory with the name (the run's hash: engine, case, derived numbers, templates) and the
     engine time of one already read is a copy of that run (e.g. a ladder's rung copied into another
     ladder's tree to be reused) and would count it twice; a rerun of the same case elsewhere took
     its own time and counts."""
