@@ -10,12 +10,8 @@ import json
 import sys
 from pathlib import Path
 
+from .console import console
 from .registry import engine_names, get_engine
-
-
-def _console():
-    from rich.console import Console
-    return Console(soft_wrap=True)          # no hard wraps: output stays greppable in logs
 
 
 def _num(x) -> str:
@@ -42,7 +38,7 @@ def cmd_validate(args) -> int:
     from .derive import derive
     case = load_case(args.case)
     p = derive(case)
-    con = _console()
+    con = console()
     refusals = {eng: why for eng in case.engines if (why := _refusal(case, p, eng))}
     verdict = (f"[green]{args.case}: valid[/green]" if not refusals else
                f"[red]{args.case}: not runnable on {', '.join(refusals)} as written[/red]")
@@ -71,7 +67,7 @@ def cmd_run(args) -> int:
     from .runner import run_case
     case = load_case(args.case)
     engines = case.engines if args.engine == "all" else [args.engine]
-    con = _console()
+    con = console()
     status = 0
     from .derive import derive
     from .sizing import busy_note, check_fits, describe, estimate
@@ -135,7 +131,7 @@ def cmd_clock(args) -> int:
     from rich.table import Table
     from .clock import (load_table, machine_factor, machine_id, package_table_path, refresh, samples_from_runs,
                         speed_table_path, user_table_path)
-    con = _console()
+    con = console()
     if args.action == "refresh":
         missing = [r for r in args.runs if not Path(r).exists()]
         if missing or not args.runs:
@@ -175,7 +171,7 @@ def cmd_clock(args) -> int:
 def cmd_engines(args) -> int:
     from rich.table import Table
     from engines.base import FEATURES
-    con = _console()
+    con = console()
     t = Table(title="DEM engines")
     t.add_column("feature")
     engs = [get_engine(n) for n in engine_names()]
@@ -206,7 +202,7 @@ def cmd_verify(args) -> int:
         print(f"error: no verification case matches {args.case}", file=sys.stderr)
         return 2
     tab = run_verification(engines=engines, cases=cases, runs_root=args.runs, force=args.force)
-    con = _console()
+    con = console()
     for eng in engines:
         sub = tab[tab.engine == eng]
         t = Table(title=f"Contact-level verification (Chung & Ooi 2011) — {eng}")

@@ -5,6 +5,8 @@ import json
 import sys
 from pathlib import Path
 
+from ..console import console
+
 
 def _parse_options(items) -> dict:
     """``--option measure.key=value`` (value parsed as JSON when possible) and ``--states all``."""
@@ -43,9 +45,8 @@ def _print_table(cmp, con):
 
 
 def cmd_compare(args) -> int:
-    from rich.console import Console
     from .core import compare
-    con = Console()
+    con = console()
     opts = _parse_options(args.option)
     if args.states:
         opts["states"] = args.states
@@ -142,9 +143,8 @@ def case_differences(a, b) -> tuple[list[str], list[str]]:
 
 
 def cmd_crossval(args) -> int:
-    from rich.console import Console
     from .crossval import crossval
-    con = Console()
+    con = console()
     if args.ladder:
         return cmd_ladder(args, con)
     conc = {"auto": "auto", "yes": True, "no": False}[args.concurrent]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from rich.console import Console
+from ..console import console
 from rich.progress import Progress
 
 from ..frames import Frames, write_frames
@@ -28,7 +28,7 @@ def _length(s):
 
 
 def synth_main(args) -> int:
-    con = Console(stderr=True)
+    con = console(stderr=True)
     vs = _length(args.voxel_size)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -74,7 +74,7 @@ def _scan_options(args) -> dict:
 
 
 def segment_main(args) -> int:
-    con = Console(stderr=True)
+    con = console(stderr=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     kw = _scan_options(args)
@@ -110,7 +110,7 @@ def segment_main(args) -> int:
 
 
 def track_main(args) -> int:
-    con = Console(stderr=True)
+    con = console(stderr=True)
     segdir = Path(args.segdir)
     meta_path = segdir / "segment.json"
     if not meta_path.exists():
@@ -156,7 +156,7 @@ def shapes_main(args) -> int:
     """A clump shape library (YAML for ``scene.particles.library``) from one scan, which is segmented
     first, or from a label volume ``<scan>_labels.tif`` of ``ct segment --labels`` with its
     ``<scan>_grains.csv`` beside it."""
-    con = Console(stderr=True)
+    con = console(stderr=True)
     src, out = Path(args.input), Path(args.out)
     if out.suffix.lower() not in (".yaml", ".yml"):
         con.print(f"[red]error:[/red] {out}: a shape library is written as YAML; give -o/--out ending in .yaml")

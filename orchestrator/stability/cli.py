@@ -6,16 +6,12 @@ import glob
 import json
 from pathlib import Path
 
+from ..console import console
 from ..registry import engine_names
 
 REPO = Path(__file__).resolve().parents[2]
 #: the members of cases/stability/ small enough for CI (soft grains, ~100 grains, seconds per probe)
 CI_SUITE = ("mu0", "mu1", "very_soft", "fast_shear", "restitution_overdamped")
-
-
-def _console():
-    from rich.console import Console
-    return Console()
 
 
 def _print_df(df, title, floatfmt="{:.4g}"):
@@ -26,7 +22,7 @@ def _print_df(df, title, floatfmt="{:.4g}"):
     for _, r in df.iterrows():
         from rich.markup import escape
         t.add_row(*[floatfmt.format(v) if isinstance(v, float) else escape(str(v)) for v in r.to_list()])
-    _console().print(t)
+    console().print(t)
 
 
 def _suite(which: str) -> list[str]:
@@ -44,7 +40,7 @@ def cmd_stability(args) -> int:
     if not cases:
         print("give a CASE or --suite ci|all")
         return 2
-    con = _console()
+    con = console()
     results = []
     for c in cases:
         case = load_case(c)
@@ -97,7 +93,7 @@ def cmd_convergence(args) -> int:
         if len(ext):        # the extrapolation beside it: CSV.csv -> CSV-extrapolation.csv
             csv = Path(args.csv)
             write_text(csv.with_name(f"{csv.stem}-extrapolation{csv.suffix or '.csv'}"), ext.to_csv(index=False))
-    con = _console()
+    con = console()
     from rich.markup import escape
     for eng, r in out["recommendation"].items():
         ff = r.get("full_fidelity") or {}
@@ -119,7 +115,7 @@ def _val(v: str):
 
 def cmd_sweep(args) -> int:
     from .sweep import sweep
-    con = _console()
+    con = console()
 
     def show(task, res):
         con.print(f"  {task['engine']} {task['point']} -> {res.get('status')}"
@@ -141,7 +137,7 @@ def cmd_calibrate(args) -> int:
     keep = [c for c in ("contact.friction", "engine", "status", "mu_macro", "mu_macro_sem", "solid_fraction_nominal",
                         "engine_time_s") if c in df.columns]
     _print_df(df[keep], f"mu_macro(mu), {args.case}")
-    con = _console()
+    con = console()
     for eng, f in out["fits"].items():
         if "error" in f:
             con.print(f"[red]{eng}: {f['error']}[/red]")
