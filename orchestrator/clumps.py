@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .psd import portable
+
 
 class LibraryError(ValueError):
     """A shape library that cannot be used: the file, the shape and what is wrong."""
@@ -148,8 +150,11 @@ def random_quaternions(n: int, rng: np.random.Generator) -> np.ndarray:
     """n uniformly distributed unit quaternions (w, x, y, z) (Shoemake 1992)."""
     u1, u2, u3 = rng.random((3, n))
     a, b = np.sqrt(1 - u1), np.sqrt(u1)
-    return np.column_stack([b * np.cos(2 * np.pi * u3), a * np.sin(2 * np.pi * u2),
-                            a * np.cos(2 * np.pi * u2), b * np.sin(2 * np.pi * u3)])
+    # rounded (psd.portable: vectorised sin and cos differ by an ulp on AVX-512 CPUs), then normalised
+    # (sqrt and division are exact IEEE operations): the same orientations on every x86 CPU
+    q = portable(np.column_stack([b * np.cos(2 * np.pi * u3), a * np.sin(2 * np.pi * u2),
+                                  a * np.cos(2 * np.pi * u2), b * np.sin(2 * np.pi * u3)]))
+    return q / np.sqrt(np.sum(q * q, axis=1))[:, None]
 
 
 def rotation_matrix(q) -> np.ndarray:

@@ -63,7 +63,7 @@ from ..derive import DerivationError
 from ..frames import load as load_frames
 from ..numerics import running_mean
 from ..params import Params, ScenePart, StabilityInputs, opt
-from ..psd import Cylinder, lognormal_mu_for_mean, relax_overlaps, truncated_lognormal
+from ..psd import Cylinder, lognormal_mu_for_mean, portable, relax_overlaps, truncated_lognormal
 from ..particles_io import read_particle_table, write_particle_table
 from ..units import Length, Pressure
 from . import base, servo_loop
@@ -806,8 +806,9 @@ def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.nda
     """:func:`pack_cylinder`, cached by its inputs in ``$ORCHESTRATOR_CACHE/packings`` (default
     ``~/.cache/orchestrator``), so that both engines' runs of a case pack once. The key's last
     field is the packer's version (2: :func:`~orchestrator.psd.relax_overlaps` on a Verlet list,
-    whose sums differ from version 1's in the last bits), so a cache never mixes the two."""
-    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 2)).encode())
+    whose sums differ from version 1's in the last bits; 3: the random start rounded by
+    :func:`~orchestrator.psd.portable`), so a cache never mixes them."""
+    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 3)).encode())
     root = Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / "packings"
     f = root / f"{h.hexdigest()[:24]}.npz"
     if f.exists():
@@ -832,7 +833,9 @@ def pack_cylinder(r: np.ndarray, R: float, H: float, rng: np.random.Generator, t
     u = rng.random(n)
     th = rng.random(n) * 2 * np.pi
     rho = np.sqrt(u) * np.maximum(R - r, 0)
-    pos = np.column_stack([rho * np.cos(th), rho * np.sin(th), r + rng.random(n) * np.maximum(H - 2 * r, 0)])
+    # rounded (psd.portable): NumPy's vectorised sin and cos take another SIMD path on AVX-512 CPUs and
+    # differ by an ulp; rounded, a seed gives the same packing on every x86 CPU
+    pos = portable(np.column_stack([rho * np.cos(th), rho * np.sin(th), r + rng.random(n) * np.maximum(H - 2 * r, 0)]))
     rmax = r.max()
     pos, it, worst = relax_overlaps(pos, r, Cylinder(R, 0.0, H), tol, r.min(), max_iter)
     if worst >= tol:
