@@ -7,6 +7,13 @@ import os
 from pathlib import Path
 
 
+def cache_dir(kind: str) -> Path:
+    """``$ORCHESTRATOR_CACHE/<kind>`` (default ``~/.cache/orchestrator/<kind>``): where results that
+    a pure computation can always make again are kept between processes (packings, clump mass
+    properties). Not created here."""
+    return Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / kind
+
+
 def umask() -> int:
     """The process's file-creation mask (read by setting and restoring it)."""
     m = os.umask(0o022)

@@ -70,16 +70,18 @@ def cmd_run(args) -> int:
     con = console()
     status = 0
     from .derive import derive
-    from .sizing import busy_note, check_fits, describe, estimate
+    from .sizing import busy_cores, busy_note, check_fits, describe, estimate
     params = derive(case)
     from .case import CaseError
     refusals = [f"engine {eng}: {why}" for eng in engines if (why := _refusal(case, params, eng))]
     if refusals:                                  # refused before any sizing, packing or run directory
         raise CaseError(case.source or args.case, refusals)
+    # a dry run samples the machine's load once; a run, at each engine's start (the one before has just ended)
+    busy_now = busy_cores() if args.dry_run else None
     for eng in engines:
         size = estimate(case, params, eng)
         warnings = check_fits(case, size, force=args.force)        # refuses a case too big for the machine
-        busy = busy_note(get_engine(eng).workers(case))
+        busy = busy_note(get_engine(eng).workers(case), busy_now)
         con.print(f"[cyan]{eng}[/cyan]: {case.name}: {describe(size)}")
         if busy:
             warnings = [busy] + warnings

@@ -64,6 +64,22 @@ def test_mass_properties_against_closed_forms():
     assert I[0, 0] < I[1, 1] and I[1, 1] == pytest.approx(I[2, 2], rel=1e-2)
 
 
+def test_mass_properties_disk_cache_returns_the_integration_exactly(tmp_path, monkeypatch):
+    # a later process reads the stored integration: the same doubles, array for array
+    import orchestrator.clumps as clumps
+    monkeypatch.setenv("ORCHESTRATOR_CACHE", str(tmp_path))
+    monkeypatch.setattr(clumps, "_MASS_CACHE", {})
+    s = np.array([[0.0, 0.1, 0.0, 0.7], [0.9, 0.0, 0.2, 0.5]])
+    fresh = mass_properties(s, density=2650.0, cells=40)
+    assert len(list((tmp_path / "clump_mass").glob("*.json"))) == 1
+    monkeypatch.setattr(clumps, "_MASS_CACHE", {})
+    monkeypatch.setattr(clumps, "_mass_properties", lambda *a: pytest.fail("integrated again"))
+    stored = mass_properties(s, density=2650.0, cells=40)
+    assert stored.keys() == fresh.keys()
+    for k in fresh:
+        assert np.array_equal(np.asarray(stored[k]), np.asarray(fresh[k])), k
+
+
 def test_place_is_a_rigid_scaled_motion():
     rng = np.random.default_rng(3)
     for sh in load_library(LIB):

@@ -56,7 +56,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from ..atomic import write_json, write_text
+from ..atomic import cache_dir, write_json, write_text
 from ..case import Strict, positive
 from ..clumps import bounding_radius, equivalent_scale, load_library, mass_properties, place, random_quaternions
 from ..derive import DerivationError
@@ -809,7 +809,7 @@ def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.nda
     whose sums differ from version 1's in the last bits; 3: the random start rounded by
     :func:`~orchestrator.psd.portable`), so a cache never mixes them."""
     h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 3)).encode())
-    root = Path(os.environ.get("ORCHESTRATOR_CACHE", Path.home() / ".cache" / "orchestrator")) / "packings"
+    root = cache_dir("packings")
     f = root / f"{h.hexdigest()[:24]}.npz"
     if f.exists():
         d = np.load(f)
