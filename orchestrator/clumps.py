@@ -48,7 +48,8 @@ def load_library(path) -> list[np.ndarray]:
     """Shapes as a list of (m, 4) arrays [x, y, z, r]; validated (see :func:`check_shape`)."""
     path = Path(path)
     if not path.exists():
-        raise LibraryError(f"{path}: clump library not found")
+        raise LibraryError(f"{path}: clump library not found (scene.particles.library is read relative to the case "
+                           "file that names it; write a path from there, or an absolute one)")
     if path.suffix.lower() == ".npz":
         d = np.load(path)
         if "spheres" not in d or "shape" not in d:
