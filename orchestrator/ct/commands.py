@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from ..console import console
 from rich.progress import Progress
 
+from ..console import console
 from ..frames import Frames, write_frames
 from ..units import to_si
 from . import clumpfit, segment, shape, synth, track
