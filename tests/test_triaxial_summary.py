@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orchestrator.scenes.triaxial import peak_stress_ratio, running_mean, smoothing_rows
+from orchestrator.scenes.triaxial import peak_stress_ratio, running_mean, smoothing_rows, solid_fraction_profile
 
 
 def test_smoothing_window():
@@ -134,7 +134,6 @@ def test_solid_fraction_profile_shows_a_crust_round_a_looser_core():
     (within 10 % of π/6: a regular grid on a regular lattice aliases a little, which a random packing
     does not); with every other sphere taken out of the core (radius < 12 r), the core's rings read
     half the crust's."""
-    from orchestrator.scenes.triaxial import solid_fraction_profile
     r, R, H = 1.0, 30.0, 14.0
     g = np.arange(-R, R + 1e-9, 2 * r)
     x, y, z = np.meshgrid(g, g, np.arange(r, H - r + 1e-9, 2 * r), indexing="ij")

@@ -966,16 +966,11 @@ def void_ratios(pos: np.ndarray, r: np.ndarray, solid_volume: float, volume_boun
     rc = 0.6 * np.sqrt(volume_hull / (np.pi * H))
     h = d50 / 6
     gx = np.arange(-rc + h / 2, rc, h)
-    gz = np.arange(lo + h / 2, hi, h)
     X, Y = np.meshgrid(gx, gx, indexing="ij")
     disk = np.hypot(X, Y).ravel() < rc
     xy = np.column_stack([X.ravel()[disk], Y.ravel()[disk]])
-    tree = cKDTree(pos)
-    solid = 0
-    for z in gz:                                          # one layer of points at a time
-        pts = np.column_stack([xy, np.full(len(xy), z)])
-        solid += int(np.count_nonzero(_inside_any_sphere(tree, r, pts)))
-    phi = solid / (len(xy) * len(gz))
+    solid, total = _grid_solid(pos, r, xy, np.zeros(len(xy), int), 1, z_bottom, z_top, d50)
+    phi = float(solid[0] / total[0]) if total[0] else 0.0
     out["interior"] = 1 / phi - 1 if phi > 0 else None
     out["interior_solid_fraction"] = phi
     return out
@@ -996,13 +991,23 @@ def solid_fraction_profile(pos: np.ndarray, r: np.ndarray, z_bottom: float, z_to
     ring = np.digitize(np.hypot(X, Y).ravel(), edges) - 1
     keep = ring < rings
     xy, ring = np.column_stack([X.ravel(), Y.ravel()])[keep], ring[keep]
-    tree = cKDTree(pos)
-    solid, total = np.zeros(rings), np.zeros(rings)
-    for z in np.arange(z_bottom + 2 * d50 + d50 / 12, z_top - 2 * d50, d50 / 6):
-        inside = _inside_any_sphere(tree, r, np.column_stack([xy, np.full(len(xy), z)]))
-        solid += np.bincount(ring, weights=inside, minlength=rings)
-        total += np.bincount(ring, minlength=rings)
+    solid, total = _grid_solid(pos, r, xy, ring, rings, z_bottom, z_top, d50)
     return edges, np.divide(solid, total, out=np.full(rings, np.nan), where=total > 0)
+
+
+def _grid_solid(pos: np.ndarray, r: np.ndarray, xy: np.ndarray, label: np.ndarray, n: int, z_bottom: float,
+                z_top: float, d50: float) -> tuple[np.ndarray, np.ndarray]:
+    """The CT-like point count of :func:`void_ratios` and :func:`solid_fraction_profile`: layers of the
+    points ``xy`` [m], d50/6 apart from 2 d50 above the bottom platen to 2 d50 below the top one, one
+    layer at a time; returns (points inside a sphere, points) per ``label`` (0..n-1) [-]."""
+    tree = cKDTree(pos)
+    solid, total = np.zeros(n), np.zeros(n)
+    h = d50 / 6
+    for z in np.arange(z_bottom + 2 * d50 + h / 2, z_top - 2 * d50, h):
+        inside = _inside_any_sphere(tree, r, np.column_stack([xy, np.full(len(xy), z)]))
+        solid += np.bincount(label, weights=inside, minlength=n)
+        total += np.bincount(label, minlength=n)
+    return solid, total
 
 
 def _void_ratios_at(sc: dict, series: dict, j: int, pos: np.ndarray, r: np.ndarray, volume_hull: float) -> dict | None:
