@@ -24,8 +24,17 @@ CASES = REPO / "cases"
 
 @pytest.fixture(scope="session")
 def runs_root(tmp_path_factory) -> Path:
-    """One runs/ directory for the session, so engine runs are shared between tests."""
-    return tmp_path_factory.mktemp("runs")
+    """One runs/ directory for the whole session, so engine runs are shared between tests, and
+    between the two xdist workers: each worker's base temp is ``pytest-N/popen-gwK``, and their
+    common parent ``pytest-N`` belongs to this session alone. A case one worker is running, the other
+    waits for (the run directory's lock) and then reuses, as `orchestrator run` does for two
+    processes (orchestrator/runner.py; tests/test_faults.py, three runs at once); before, the
+    two workers each ran the cases their files share (the shear-cell smoke case on two engines)
+    whenever xdist put those files on different workers."""
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "runs"
+    root.mkdir(exist_ok=True)
+    return root
 
 
 @pytest.fixture(scope="session")
