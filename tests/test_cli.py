@@ -102,11 +102,13 @@ def test_vtk_export_of_a_run(runs_root, engines_installed):
 
 
 @pytest.mark.engine
-def test_crossval_command_writes_table_report_and_wall_times(tmp_path, engines_installed):
-    out = cli("crossval", VER / "chung_ooi_1_sphere_sphere_glass.yaml", "--runs", tmp_path,
+def test_crossval_command_writes_table_report_and_wall_times(runs_root, engines_installed):
+    """In the session's runs directory: the engine runs the verification tests made of this case are
+    reused (a reused run brings its recorded wall times); the crossval folder is this test's alone."""
+    out = cli("crossval", VER / "chung_ooi_1_sphere_sphere_glass.yaml", "--runs", runs_root,
               "--measure", "displacements", "--states", "ends")
     assert out.returncode == 0, out.stderr[-2000:]
-    d = tmp_path / "chung_ooi_1_sphere_sphere_glass" / "crossval"
+    d = Path(runs_root) / "chung_ooi_1_sphere_sphere_glass" / "crossval"
     for name in ("comparison.csv", "report.html", "wall_times.csv", "grains.csv"):
         assert (d / name).stat().st_size > 0, name
     import pandas as pd
