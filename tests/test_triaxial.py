@@ -1,6 +1,6 @@
 """The membrane triaxial test (seed 001, issue 4) on both real engines, smoke case.
 
-One run per engine (about 1.5 min LIGGGHTS, 6 min YADE on one free core), plus two short unstable
+One run per engine (about 1.2 min LIGGGHTS, 5.5 min YADE on one free core of session 22's machine), plus two short unstable
 runs for the monitors, and the triaxial notebook on the LIGGGHTS run; a YADE run on a second
 packing (seed 2) is in the slow tier (``-m slow``). Checks the floors of
 issue 4: confining pressure within 3 % of the target before axial loading, σ1/σ3 = 1 ± 0.05 after
@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 ENGINES = ["liggghts", "yade"]
 #: expected minutes (tests/conftest.py schedule_groups: this file starts first)
-SCHEDULE_MINUTES = {"yade": 7, "liggghts": 3}
+SCHEDULE_MINUTES = {"yade": 6, "liggghts": 2}
 
 
 @pytest.fixture(scope="module")
