@@ -168,41 +168,14 @@ class Membrane:
         on the contact stiffness. Without it the grain-membrane contacts, whose force jumps when a
         contact passes from one facet to the next, pumped energy into the sample as soon as the
         stage-1 drag was removed."""
-        # The same sums in the same order as contact_damping_forces (a PyRunner every step: ~1/3 of
-        # the smoke triaxial's time), written out rather than through _contacts: the facet's
-        # velocity is read once per facet in contact (not once per contact) and the grains' State
-        # objects are kept (they live until the next O.load, which builds a new Membrane); 1.27 ->
-        # 0.8 ms a call on the smoke sample's 78 contacts (docs/speed.md)
-        if not hasattr(self, "fcache"):
-            next(self._contacts(), None)
         addF = O.forces.addF
-        withBody = O.interactions.withBody
-        bodies = O.bodies
-        gstates = self.__dict__.setdefault("gstates", {})
-        ccache = self.ccache
-        mn = 3 * self.node_mass
-        for f, fb, (n1, n2, n3), nst in self.fcache:
-            intrs = withBody(f)
-            if not intrs:
-                continue
+        for g, gs, nodes, nst, n, c in self._contacts():
             vf = (nst[0].vel + nst[1].vel + nst[2].vel) / 3.0
-            for I in intrs:
-                g = I.id1 if I.id2 == f else I.id2
-                gs = gstates.get(g)
-                if gs is None:
-                    gs = gstates[g] = bodies[g].state
-                kn = I.phys.kn
-                c = ccache.get((g, kn))
-                if c is None:
-                    mg = gs.mass
-                    c = ccache[(g, kn)] = self.c_contact * 2 * math.sqrt(kn * mg * mn / (mg + mn))
-                n = I.geom.normal
-                F = n * (-c * (gs.vel - vf).dot(n))
-                addF(g, F)
-                F3 = F / -3.0
-                addF(n1, F3)
-                addF(n2, F3)
-                addF(n3, F3)
+            F = n * (-c * (gs.vel - vf).dot(n))
+            addF(g, F)
+            F3 = F / -3.0
+            for nid in nodes:
+                addF(nid, F3)
 
     def relax(self):
         """Make the membrane's current shape stress-free (the sheet is fitted on the sample as it
