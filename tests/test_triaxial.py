@@ -394,9 +394,8 @@ def test_drag_ramp_is_the_rearrangement_time_under_the_drag():
     at once."""
     import math
     from orchestrator.derive import derive
-    whole = load_case(SMOKE, overrides={"scene": {"isotropic": {"drag_ramp": 1.0}}})
-    iso = derive(whole)["scene"]["iso"]
-    dt = derive(whole)["dt"]
+    whole = derive(load_case(SMOKE, overrides={"scene": {"isotropic": {"drag_ramp": 1.0}}}))
+    iso, dt = whole["scene"]["iso"], whole["dt"]
     T = 18 * iso["drag_viscosity"] / 3e5                      # the smoke case's p = 300 kPa
     assert iso["drag_ramp_time"] == pytest.approx(T)
     # the same time from its definition t_i^2 / tau_d with d50's mass and drag coefficient
@@ -404,8 +403,9 @@ def test_drag_ramp_is_the_rearrangement_time_under_the_drag():
     t_i = d50 * math.sqrt(rho / p)
     tau_d = (rho * math.pi * d50 ** 3 / 6) / (6 * math.pi * iso["drag_viscosity"] * d50 / 2)
     assert iso["drag_ramp_time"] == pytest.approx(t_i ** 2 / tau_d)
-    smoke = derive(load_case(SMOKE))["scene"]["iso"]
-    assert load_case(SMOKE).scene.isotropic.drag_ramp == 0.5
+    case = load_case(SMOKE)
+    assert case.scene.isotropic.drag_ramp == 0.5
+    smoke = derive(case)["scene"]["iso"]
     assert smoke["drag_ramp_time"] == pytest.approx(0.5 * T)
     assert smoke["drag_ramp_steps"] % iso["chunk"] == 0 and 0 <= smoke["drag_ramp_steps"] * dt - 0.5 * T < iso["chunk"] * dt
     n = iso["drag_ramp_steps"]
