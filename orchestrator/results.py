@@ -57,12 +57,14 @@ class KeyResult:
 
 def format_measure(value: float, error: float | None = None, unit: str = "") -> str:
     """``value ± error unit`` rounded so that the error keeps two significant digits (the value to
-    the same decimal); without an error, four significant digits. NaN prints as "n/a"."""
+    the same decimal); without an error, four significant digits (from 10 000 to 10^9 written out, with
+    thousands separators: "16,070 s", not "1.607e+04 s"). NaN prints as "n/a"."""
     u = f" {unit}" if unit else ""
     if value is None or not np.isfinite(value):
         return "n/a"
     if error is None or not np.isfinite(error) or error <= 0:
-        return f"{value:.4g}{u}"
+        rounded = float(f"{value:.4g}")
+        return f"{rounded:,.0f}{u}" if 1e4 <= abs(rounded) < 1e9 else f"{value:.4g}{u}"
     digits = max(0, 1 - int(math.floor(math.log10(error))))
     if digits > 6 or abs(value) >= 1e6:
         return f"{value:.3e} ± {error:.2e}{u}"
@@ -234,8 +236,23 @@ def key_results(run_dir) -> list[KeyResult]:
                 wt = whole
             else:          # no complete record (a run from before it existed)
                 note = f"{where}: this part only" + (f"; the whole run was {note}" if note else "")
+        cpu = _one_rank_cpu_seconds(summary)
+        if cpu is not None:
+            note = f"{format_measure(cpu, None, 's')} of CPU" + (f"; {note}" if note else "")
         rows.append(KeyResult("engine time", float(wt), "s", None, "", note))
     return rows
+
+
+def _one_rank_cpu_seconds(summary: dict) -> float | None:
+    """CPU time [s] of a one-rank run, all its attempts (:func:`orchestrator.attempts.run_cost`; the
+    figure the clock learns from, orchestrator.clock): the wall time also counts the time the engine
+    waited for a core it shared or was paused. None for several ranks (a waiting rank polls, so its
+    CPU time is no measure) or without a complete record."""
+    attempts = [a for a in summary.get("attempts") or [] if isinstance(a, dict)]
+    if not attempts or any(a.get("ranks", 1) != 1 or not a.get("cpu_s") for a in attempts
+                           if a.get("last_step") is not None):
+        return None
+    return run_cost(attempts, int(summary.get("steps_run") or 0), use_cpu=True)
 
 
 def results_frame(run_dir) -> pd.DataFrame:

@@ -18,6 +18,11 @@ def test_format_measure_keeps_two_significant_digits_of_the_error():
     assert format_measure(0.001234, None) == "0.001234"
     assert format_measure(float("nan"), 1.0) == "n/a"
     assert format_measure(2.5, 0.0, "°") == "2.5 °"
+    # large figures without an error written out, four significant digits, not in e-notation
+    assert format_measure(16067.3, None, "s") == "16,070 s"
+    assert format_measure(9999.7, None) == "10,000"
+    assert format_measure(1234.5, None) == "1234"
+    assert format_measure(2e9, None) == "2e+09"
 
 
 def _fake_shear_cell_run(tmp_path):
@@ -73,8 +78,17 @@ def test_engine_time_of_a_resumed_run_says_it_covers_only_the_last_part(tmp_path
     (run / "summary.json").write_text(json.dumps(s))
     rows = {r.quantity: r for r in key_results(run)}
     assert rows["engine time"].value == pytest.approx(120.0 + 200.0 * 160000 / 164250)
-    assert rows["engine time"].seed == ("the whole run, 2 attempts (the last, resumed from step 235750, 200 s); "
-                                        "estimated 180 s before the run")
+    # one rank: the whole run's CPU time too (110 s + 190 s x the new share of the last attempt), the
+    # figure the clock counts: the wall time holds whatever waiting or pausing the attempts met
+    cpu = 110.0 + 190.0 * 160000 / 164250
+    assert rows["engine time"].seed == (f"{cpu:.4g} s of CPU; the whole run, 2 attempts (the last, resumed from "
+                                        "step 235750, 200 s); estimated 180 s before the run")
+    # several ranks: no CPU figure (a rank waiting for the other polls)
+    for a in s["attempts"]:
+        a["ranks"] = 2
+    (run / "summary.json").write_text(json.dumps(s))
+    rows = {r.quantity: r for r in key_results(run)}
+    assert rows["engine time"].seed.startswith("the whole run, 2 attempts")
 
 
 def test_no_band_is_said_not_hidden(tmp_path):
