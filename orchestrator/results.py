@@ -31,6 +31,7 @@ import pandas as pd
 import yaml
 
 from .attempts import run_cost
+from .clock import run_engine_seconds
 from .scenes.shear_cell import COMPRESSION_TOLERANCE
 
 __all__ = ["KeyResult", "key_results", "format_measure", "results_frame"]
@@ -236,23 +237,13 @@ def key_results(run_dir) -> list[KeyResult]:
                 wt = whole
             else:          # no complete record (a run from before it existed)
                 note = f"{where}: this part only" + (f"; the whole run was {note}" if note else "")
-        cpu = _one_rank_cpu_seconds(summary)
-        if cpu is not None:
-            note = f"{format_measure(cpu, None, 's')} of CPU" + (f"; {note}" if note else "")
+        # a one-rank run's CPU time (the figure the clock learns from): its wall time also holds
+        # whatever waiting for a shared core or pausing the attempts met; on several ranks the two agree
+        quiet = run_engine_seconds(run_dir, summary)
+        if quiet is not None and quiet < wt:
+            note = f"{format_measure(quiet, None, 's')} of CPU" + (f"; {note}" if note else "")
         rows.append(KeyResult("engine time", float(wt), "s", None, "", note))
     return rows
-
-
-def _one_rank_cpu_seconds(summary: dict) -> float | None:
-    """CPU time [s] of a one-rank run, all its attempts (:func:`orchestrator.attempts.run_cost`; the
-    figure the clock learns from, orchestrator.clock): the wall time also counts the time the engine
-    waited for a core it shared or was paused. None for several ranks (a waiting rank polls, so its
-    CPU time is no measure) or without a complete record."""
-    attempts = [a for a in summary.get("attempts") or [] if isinstance(a, dict)]
-    if not attempts or any(a.get("ranks", 1) != 1 or not a.get("cpu_s") for a in attempts
-                           if a.get("last_step") is not None):
-        return None
-    return run_cost(attempts, int(summary.get("steps_run") or 0), use_cpu=True)
 
 
 def results_frame(run_dir) -> pd.DataFrame:

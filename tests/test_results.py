@@ -84,8 +84,7 @@ def test_engine_time_of_a_resumed_run_says_it_covers_only_the_last_part(tmp_path
     assert rows["engine time"].seed == (f"{cpu:.4g} s of CPU; the whole run, 2 attempts (the last, resumed from "
                                         "step 235750, 200 s); estimated 180 s before the run")
     # several ranks: no CPU figure (a rank waiting for the other polls)
-    for a in s["attempts"]:
-        a["ranks"] = 2
+    s["workers"] = 2
     (run / "summary.json").write_text(json.dumps(s))
     rows = {r.quantity: r for r in key_results(run)}
     assert rows["engine time"].seed.startswith("the whole run, 2 attempts")
