@@ -229,7 +229,7 @@ def cmd_verify(args) -> int:
 
 def cmd_analyze(args) -> int:
     import yaml
-    from .frames import Frames
+    from .grains import frames_for_analysis
     from .analysis import run_analyses
     run_dir = Path(args.run_dir)
     if not run_dir.exists():
@@ -248,7 +248,7 @@ def cmd_analyze(args) -> int:
     if not specs:
         print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
-    out = run_analyses(Frames(run_dir), specs, Path(args.out) if args.out else run_dir / "analysis")
+    out = run_analyses(frames_for_analysis(run_dir), specs, Path(args.out) if args.out else run_dir / "analysis")
     print(json.dumps(out, indent=2, default=str))
     return 0
 

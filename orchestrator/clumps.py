@@ -122,6 +122,13 @@ def mass_properties(s: np.ndarray, density: float = 1.0, cells: int = 60) -> dic
     return {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in out.items()}
 
 
+def union_properties(s: np.ndarray, cells: int = 40) -> dict:
+    """:func:`mass_properties` at unit density, integrated afresh (neither remembered nor written
+    to the disk cache): for the many one-off unions of a sample's clumps as its frames hold them
+    (:mod:`orchestrator.grains`). ``volume`` [units³] and ``center`` [units] of the union."""
+    return _mass_properties(np.asarray(s, dtype=float), 1.0, int(cells))
+
+
 def _stored_mass_properties(s: np.ndarray, density: float, cells: int) -> dict:
     """:func:`_mass_properties`, read from or written to the disk cache (exact doubles in JSON; a
     cache that cannot be read or written is no error: the grid is integrated again)."""

@@ -380,13 +380,16 @@ class Frames:
 
     @classmethod
     def from_arrays(cls, position, radius, time=None, ids=None, controls: Mapping | None = None,
-                    meta: Mapping | None = None, **fields) -> "Frames":
+                    meta: Mapping | None = None, mass=None, step=None, contacts: Mapping | None = None,
+                    walls: Mapping | None = None, **fields) -> "Frames":
         """Frames held in memory, built from arrays without writing a file (e.g. for the array-level
-        analyses in a notebook). ``position`` (T, N, 3) [m] (or (N, 3) for one frame; NaN rows =
-        absent), ``radius`` (N,) [m], ``time`` (T,) [s] (default 0, 1, ...), ``ids`` (N,) (default
-        1..N), ``controls`` name -> (T,) arrays, other per-particle fields (T, N, ...) by name.
-        Everything that reads the file (single :class:`Frame` objects, contacts, wall series) is
-        not available on such a set: it has no contacts and no walls."""
+        analyses in a notebook, or a clump sample's grains, :mod:`orchestrator.grains`). ``position``
+        (T, N, 3) [m] (or (N, 3) for one frame; NaN rows = absent), ``radius`` (N,) [m], ``time``
+        (T,) [s] (default 0, 1, ...), ``ids`` (N,) (default 1..N), ``controls`` name -> (T,) arrays,
+        ``mass`` (N,) [kg], ``step`` (T,), ``contacts`` frame index -> dict of contact arrays (the
+        file's ``/contacts/<k>`` layout, :data:`CONTACT_FIELDS`, plus any other per-contact array),
+        ``walls`` name -> DataFrame (as :meth:`wall` returns), other per-particle fields (T, N, ...)
+        by name."""
         pos = np.asarray(position, dtype=float)
         if pos.ndim == 2:
             pos = pos[None]
@@ -397,10 +400,10 @@ class Frames:
         self.path = "<arrays>"
         self.ids = np.arange(1, N + 1, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
         self.radius = np.broadcast_to(np.asarray(radius, dtype=float), (N,)).copy()
-        self.mass = None
+        self.mass = None if mass is None else np.asarray(mass, dtype=float)
         self.shape = None
         self.time = np.arange(T, dtype=float) if time is None else np.asarray(time, dtype=float)
-        self.step = np.arange(T, dtype=np.int64)
+        self.step = np.arange(T, dtype=np.int64) if step is None else np.asarray(step, dtype=np.int64)
         self._cache = {"position": pos, **{k: np.asarray(v) for k, v in fields.items() if v is not None}}
         unknown = [k for k in self._cache if k not in PER_PARTICLE_FIELDS]
         if unknown:
@@ -414,10 +417,19 @@ class Frames:
         self.fields = tuple(f for f in PER_PARTICLE_FIELDS if f in self._cache)
         self.controls = {k: np.asarray(v, dtype=float) for k, v in (controls or {}).items()}
         self.meta = dict(meta or {})
-        self.contact_frames = []
-        self.wall_names = []
+        if self.mass is not None and self.mass.shape != (N,):
+            raise ValueError(f"Frames.from_arrays: mass has shape {self.mass.shape}, expected ({N},) [kg]")
+        self._contacts = {int(k): {n: np.asarray(a) for n, a in c.items()} for k, c in (contacts or {}).items()}
+        self._walls = dict(walls or {})
+        self.contact_frames = sorted(self._contacts)
+        self.wall_names = sorted(self._walls)
         self._index = {int(i): k for k, i in enumerate(self.ids)}
         return self
+
+    @property
+    def in_memory(self) -> bool:
+        """True for frames built by :meth:`from_arrays` (no file behind them)."""
+        return "_contacts" in self.__dict__
 
     def __repr__(self):
         return (f"Frames({str(self.path)!r}: {self.n_frames} frames x {self.n_particles} particles, "
@@ -457,8 +469,11 @@ class Frames:
 
     def __getitem__(self, k: int) -> Frame:
         k = range(self.n_frames)[k]
-        with _open_h5(self.path) as h:
-            data = {f: h["frames"][f][k] for f in self.fields}
+        if self.in_memory:
+            data = {f: self._cache[f][k] for f in self.fields}
+        else:
+            with _open_h5(self.path) as h:
+                data = {f: h["frames"][f][k] for f in self.fields}
         return Frame(k, float(self.time[k]), int(self.step[k]), self.ids, self.radius, data,
                      {c: float(v[k]) for c, v in self.controls.items()})
 
@@ -469,6 +484,8 @@ class Frames:
     def contacts(self, k: int):
         """Contacts of frame k as a DataFrame (i, j, point, normal, fn, ft split into x/y/z)."""
         k = range(self.n_frames)[k]
+        if self.in_memory:
+            return _group_table(self.contact_arrays(k), CONTACT_FIELDS)
         with _open_h5(self.path) as h:
             if str(k) not in h["contacts"]:
                 raise KeyError(f"{self.path}: frame {k} has no contacts; frames with contacts: {self.contact_frames}")
@@ -477,12 +494,20 @@ class Frames:
     def contact_arrays(self, k: int) -> dict:
         """Contacts of frame k as a dict of arrays (``i``, ``j``, ``point``, ``normal``, ``fn``, ``ft``)."""
         k = range(self.n_frames)[k]
+        if self.in_memory:
+            if k not in self._contacts:
+                raise KeyError(f"{self.path}: frame {k} has no contacts; frames with contacts: {self.contact_frames}")
+            return {key: a.copy() for key, a in self._contacts[k].items()}
         with _open_h5(self.path) as h:
             g = h["contacts"][str(k)]
             return {key: g[key][()] for key in g}
 
     def wall(self, name: str):
         """Time series of one wall as a DataFrame (time, position_x, …, force_z, torque_z …)."""
+        if self.in_memory:
+            if name not in self._walls:
+                raise KeyError(f"{self.path}: no wall {name!r}; walls: {self.wall_names}")
+            return self._walls[name].copy()
         with _open_h5(self.path) as h:
             return _group_table(h["walls"][name])
 
@@ -537,7 +562,7 @@ def load(path) -> Frames:
 
 
 def _group_table(g, keys=None):
-    """The datasets of an HDF5 group as a DataFrame, one row per sample (the length of its ``time``
+    """The datasets of an HDF5 group (or the arrays of a dict) as a DataFrame, one row per sample (the length of its ``time``
     dataset when it has one); (M, 3) arrays become <name>_x/_y/_z columns. Datasets that are not
     one value or one vector per row (a YADE membrane's node positions per frame, its triangles, a
     node radius) go to ``DataFrame.attrs`` under their names, as arrays."""

@@ -22,12 +22,16 @@ __all__ = ["coordination_from_pairs", "neighbor_counts", "frame_contacts", "anal
 
 def coordination_from_pairs(n: int, i: np.ndarray, j: np.ndarray, mask: np.ndarray | None = None,
                             include_walls: bool = False) -> np.ndarray:
-    """Z per row from contact row pairs (i, j); rows < 0 are walls. Absent rows (mask False) -> NaN."""
+    """Z per row from contact row pairs (i, j); rows < 0 are walls. Absent rows (mask False) -> NaN.
+    Z counts distinct neighbours: two grains that touch at several points (clumps, whose member
+    spheres touch separately: orchestrator.grains) count each other once. Wall contacts are counted
+    as listed."""
     i = np.asarray(i, np.int64)
     j = np.asarray(j, np.int64)
     z = np.zeros(n)
     pp = (i >= 0) & (j >= 0)
-    z += np.bincount(i[pp], minlength=n) + np.bincount(j[pp], minlength=n)
+    pairs = np.unique(np.sort(np.column_stack([i[pp], j[pp]]), axis=1), axis=0)
+    z += np.bincount(pairs[:, 0], minlength=n) + np.bincount(pairs[:, 1], minlength=n)
     if include_walls:
         z += np.bincount(i[(i >= 0) & (j < 0)], minlength=n) + np.bincount(j[(j >= 0) & (i < 0)], minlength=n)
     if mask is not None:

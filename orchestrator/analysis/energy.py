@@ -133,7 +133,11 @@ def analyze_energy(frames, at=None, control: str | None = None, stride: int | No
         i, j = contacts_to_rows(frames, c["i"], c["j"])
         gg = (i >= 0) & (j >= 0)
         fn = np.linalg.norm(np.asarray(c["fn"], float).reshape(-1, 3)[gg], axis=1)
-        u = float(np.sum(hertz_normal_energy(fn, frames.radius[i[gg]], frames.radius[j[gg]], e_star)))
+        # the radii of the spheres that touch: the particles', or, for a clump sample's grains, the
+        # member spheres' the contact list carries (orchestrator.grains)
+        ri = np.asarray(c["radius_i"], float)[gg] if "radius_i" in c else frames.radius[i[gg]]
+        rj = np.asarray(c["radius_j"], float)[gg] if "radius_j" in c else frames.radius[j[gg]]
+        u = float(np.sum(hertz_normal_energy(fn, ri, rj, e_star)))
         kin = kinetic_energy(frames.mass, vel[k])
         kna = nonaffine_kinetic_energy(frames.mass, frames.position[k], vel[k])
         rows.append({"frame": k, "control": cvals[k], "kinetic": kin, "kinetic_nonaffine": kna, "elastic": u,
