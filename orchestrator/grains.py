@@ -182,8 +182,8 @@ def clump_frames(frames: Frames, member_ids, clump) -> Frames:
         mean = _segment_sums(np.nan_to_num(pos[k]), starts) / counts[:, None]
         c = mean + np.einsum("nij,nj->ni", R, centre0 - mean0)
         position[k, ok] = c[ok]
-        q = Rotation.from_matrix(R[ok]).as_quat()                       # (x, y, z, w)
-        orientation[k, ok] = q[:, [3, 0, 1, 2]]
+        if ok.any():
+            orientation[k, ok] = Rotation.from_matrix(R[ok]).as_quat()[:, [3, 0, 1, 2]]   # (w, x, y, z)
         if vel is not None:
             v, w = _rigid_velocity(np.nan_to_num(pos[k]), np.nan_to_num(vel[k]), starts, c,
                                    None if spin is None else np.nan_to_num(spin[k]))
