@@ -34,6 +34,7 @@ from engines.liggghts.segments import dump_segments
 from orchestrator.analysis.triaxial import triaxial_curves
 from orchestrator.case import load_case
 from orchestrator.frames import Frames
+from orchestrator.grains import frames_for_analysis
 from orchestrator.attempts import read_attempts
 from orchestrator.scenes.triaxial import (SLAB_HULL_D50, _solid_volume, _void_ratios_at, analyse, hull_volume, read_series,
                                           slab_hull_volume, solid_fraction_profile, void_ratios_at_loading)
@@ -331,6 +332,14 @@ def report(run: Path) -> dict:
         after = [r for r in rows if r[0] > off[0]]
         if after:
             out["frame_after_drag_off"] = after[0]
+        if (run / "clumps.txt").exists() and (run / "frames.h5").exists():
+            # a clump's fastest member includes its spin; its centre of mass is the grain's own speed
+            # (orchestrator.grains: the rigid-body fit of the members)
+            g = frames_for_analysis(run)
+            cs = np.linalg.norm(g.velocity, axis=2)
+            out["fastest_grain_centre_around_drag_off"] = [
+                (int(g.step[k]), round(float(np.nanmax(cs[k])), 2), int((cs[k] > FLOOR).sum()))
+                for k in range(max(0, k0 - 2), min(len(g.step), k0 + 8))]
     if len(steps):
         out["stage1_speeds"] = stage1_speeds(run, log, steps, sp)
     summ = run / "scene_summary.json"
