@@ -231,6 +231,7 @@ def cmd_analyze(args) -> int:
     import yaml
     from .grains import frames_for_analysis
     from .analysis import run_analyses
+    from .runner import read_summary, record_analyses
     run_dir = Path(args.run_dir)
     if not run_dir.exists():
         print(f"error: {run_dir}: no such run directory or frames.h5; give a run directory "
@@ -249,6 +250,10 @@ def cmd_analyze(args) -> int:
         print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
     out = run_analyses(frames_for_analysis(run_dir), specs, Path(args.out) if args.out else run_dir / "analysis")
+    summary = read_summary(run_dir) if not args.out else None
+    if summary and summary.get("status") == "complete":
+        # the run's own analyses were redone: its summary and integrity record follow them
+        record_analyses(run_dir, summary, out, specs)
     print(json.dumps(out, indent=2, default=str))
     return 0
 

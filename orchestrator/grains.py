@@ -65,10 +65,11 @@ def read_clump_map(run_dir) -> np.ndarray | None:
 
 
 def frames_for_analysis(run_dir) -> Frames:
-    """The frames the analyses read for a run directory: its ``frames.h5``, or, for a clump sample
-    (a ``clumps.txt`` beside it), the grains built from it (:func:`clump_frames`)."""
-    fr = Frames(Path(run_dir) / "frames.h5")
-    rows = read_clump_map(run_dir)
+    """The frames the analyses read for a run directory (or its ``frames.h5``): its frames, or, for
+    a clump sample (a ``clumps.txt`` beside them), the grains built from them (:func:`clump_frames`)."""
+    path = Path(run_dir)
+    fr = Frames(path)
+    rows = read_clump_map(path.parent if path.is_file() else path)
     return fr if rows is None else clump_frames(fr, rows[:, 0], rows[:, 1])
 
 

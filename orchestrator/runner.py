@@ -207,12 +207,21 @@ def _reuse(case: Case, run_dir: Path, old: dict, analyze: bool) -> RunOutcome:
     the case asks for others than it has."""
     if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
         t0 = time.perf_counter()
-        old["analysis"] = run_case_analyses(case, run_dir)
-        old["analysis_specs"] = case.analysis
-        old.setdefault("wall_time", {})["analysis"] = time.perf_counter() - t0
-        old["integrity"] = run_record(run_dir, old["analysis"])
-        write_json(run_dir / "summary.json", old)
+        record_analyses(run_dir, old, run_case_analyses(case, run_dir), case.analysis, time.perf_counter() - t0)
     return RunOutcome(run_dir, "complete", old, reused=True)
+
+
+def record_analyses(run_dir: Path, summary: dict, analysis: dict, specs, seconds: float | None = None) -> dict:
+    """Put analyses just (re)done in ``run_dir/analysis`` into the complete run's ``summary`` and
+    its integrity record (so that the next ``orchestrator run`` of the case reuses them rather than
+    reading changed files as damage), and write ``summary.json``. Returns the summary."""
+    summary["analysis"] = analysis
+    summary["analysis_specs"] = specs
+    if seconds is not None:
+        summary.setdefault("wall_time", {})["analysis"] = seconds
+    summary["integrity"] = run_record(run_dir, analysis)
+    write_json(Path(run_dir) / "summary.json", summary)
+    return summary
 
 
 class _RunLock:

@@ -187,3 +187,28 @@ def test_frames_for_analysis_reads_grains_when_the_run_has_clumps(tmp_path):
     assert all(e["status"] == "ok" for e in out.values()), json.dumps(out, default=str)[:2000]
     with pytest.raises(ValueError, match="in no clump"):
         clump_frames(fr, ids[1:], clump[1:])
+
+
+def test_analyze_redoes_a_complete_clump_run_on_grains_and_keeps_its_record(tmp_path, capsys):
+    """`orchestrator analyze RUN_DIR` on a complete run: its analyses on grains, and the run's summary
+    and integrity record follow them (the next `orchestrator run` reuses them instead of reading the
+    changed files as damage)."""
+    from orchestrator.cli import main
+    from orchestrator.integrity import run_record, verify_run
+    fr, (ids, clump), centres, _, _ = _deformed_run()
+    write_frames(tmp_path / "frames.h5", fr.ids, fr.radius, fr.time, fr.position, mass=fr.mass, velocity=fr.velocity)
+    (tmp_path / "clumps.txt").write_text("# member_id clump\n" + "".join(f"{i} {c}\n" for i, c in zip(ids, clump)))
+    (tmp_path / "case.yaml").write_text("analysis: [rdf]\n")
+    (tmp_path / "summary.json").write_text(json.dumps({"status": "complete", "integrity": run_record(tmp_path)}))
+    assert main(["analyze", str(tmp_path)]) == 0
+    capsys.readouterr()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["analysis_specs"] == ["rdf"] and summary["analysis"]["rdf"]["status"] == "ok"
+    assert verify_run(tmp_path, summary) == []
+    assert "analysis/rdf_rdf.csv" in summary["integrity"]
+    # g(r) of the grains: no pair closer than two grains' equivalent radii at contact would allow
+    # (on the members it would peak inside one clump, at the member spacing)
+    import pandas as pd
+    g = pd.read_csv(tmp_path / "analysis" / "rdf_rdf.csv")
+    first = g.loc[g["g"] > 0, "r"].min()
+    assert first > 4 * R0
