@@ -29,9 +29,11 @@ into one particle per clump, the way freud's ``NeighborQuery.from_system`` adapt
   spheres' radii as ``radius_i`` and ``radius_j`` (a contact's Hertz energy depends on the members
   that touch, :mod:`orchestrator.analysis.energy`). Several contacts may join the same two grains;
   :func:`orchestrator.analysis.coordination.coordination_from_pairs` counts a neighbour once.
-- The members' ``stress`` field (their per-atom virials, which omit the forces inside a clump) is
-  dropped: Love–Weber's grain stress from the contact points takes its place
-  (:func:`orchestrator.analysis.stress.particle_stress`). ``force`` and ``torque`` are dropped too.
+- **stress**: Love–Weber's grain stress σ = (1/V) Σ_c (x_c − x) ⊗ f_c over the grain's contact
+  points (:func:`orchestrator.analysis.stress.love_weber_stress`, V the union's volume), in every
+  frame with contacts (NaN rows in a frame without): the members' own ``stress`` field (their
+  per-atom virials) leaves out the forces that hold a clump together. ``force`` and ``torque``
+  are dropped.
 - time, steps, controls, walls and meta are the members' frames'.
 
 Grain ids are 1 + the clump index of ``clumps.txt`` (0 ... n − 1). Units SI.
@@ -43,6 +45,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .analysis.neighbors import contacts_to_rows
+from .analysis.stress import love_weber_stress
 from .clumps import union_properties
 from .frames import Frames
 
@@ -200,10 +204,17 @@ def clump_frames(frames: Frames, member_ids, clump) -> Frames:
     member_radius = frames.radius[np.argsort(frames.ids)]
     contacts = {k: _grain_contacts(frames.contact_arrays(k), member_sorted, member_grain, member_radius)
                 for k in frames.contact_frames}
+    radius = (3.0 * volume / (4.0 * np.pi)) ** (1.0 / 3.0)
+    if contacts:
+        fields["stress"] = np.full((T, n, 3, 3), np.nan)
+        for k, c in contacts.items():
+            i, j = contacts_to_rows(labels + 1, c["i"], c["j"])
+            f = np.asarray(c["fn"], float) + (np.asarray(c["ft"], float) if "ft" in c else 0.0)
+            fields["stress"][k] = love_weber_stress(position[k], radius, i, j, c["point"], f)
     meta = dict(frames.meta)
     meta["grains"] = (f"{n} clumps of {len(r)} member spheres (orchestrator.grains.clump_frames): centre of "
                       f"mass, volume-equivalent radius, rigid-body velocities, contacts between clumps")
-    return Frames.from_arrays(position, (3.0 * volume / (4.0 * np.pi)) ** (1.0 / 3.0), time=frames.time,
+    return Frames.from_arrays(position, radius, time=frames.time,
                               ids=grain_ids, controls=frames.controls, meta=meta, mass=mass, step=frames.step,
                               contacts=contacts, walls={w: frames.wall(w) for w in frames.wall_names},
                               orientation=orientation, **fields)

@@ -29,7 +29,6 @@ from .case import Case, case_from_dict
 from .derive import derive
 from .sizing import estimate_wall_time
 from .frames import Frames
-from .grains import frames_for_analysis
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
 from .params import Params, thaw
 from .registry import get_engine, get_scene
@@ -447,6 +446,7 @@ def run_case_analyses(case: Case, run_dir: Path) -> dict:
     """Run the case's ``analysis:`` list on the run's frames (orchestrator.analysis)."""
     try:
         from .analysis import run_analyses       # on demand: the analysis stack (scikit-image, pyvista) is heavy
+        from .grains import frames_for_analysis
     except ImportError as exc:  # analysis package not available
         return {"error": f"analysis unavailable: {exc}"}
     return run_analyses(frames_for_analysis(run_dir), case.analysis, run_dir / "analysis")

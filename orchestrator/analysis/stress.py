@@ -116,6 +116,9 @@ def analyze_stress(frames, window=None, interval: float | None = None, at=None, 
             targets = np.arange(cvals[ks[0]], cvals[ks[-1]] + 0.5 * interval, interval)
             ks = np.unique([ks[np.argmin(np.abs(cvals[ks] - t))] for t in targets])
         ks = list(ks)
+    # states without stresses (a frame without contacts, e.g. a clump sample's insertion frame,
+    # orchestrator.grains) are left out
+    ks = [k for k in ks if "stress" not in frames.fields or np.isfinite(frames.stress[k]).any()]
     if len(ks) < 3:
         raise ValueError(f"stress volatility needs at least 3 states in the window, got {len(ks)}")
     Q = np.stack([deviatoric_q(particle_stress(frames, k)) for k in ks])
