@@ -208,6 +208,8 @@ def clump_frames(frames: Frames, member_ids, clump) -> Frames:
     if contacts:
         fields["stress"] = np.full((T, n, 3, 3), np.nan)
         for k, c in contacts.items():
+            if "point" not in c:            # a grain's stress needs where its contacts are, not its centre's
+                continue
             i, j = contacts_to_rows(labels + 1, c["i"], c["j"])
             f = np.asarray(c["fn"], float) + (np.asarray(c["ft"], float) if "ft" in c else 0.0)
             fields["stress"][k] = love_weber_stress(position[k], radius, i, j, c["point"], f)
