@@ -1,0 +1,60 @@
+"""Where a YADE run's time goes: YADE's own per-engine timing over a few steps from the run's last
+checkpoint, in a copy of the run directory (the run itself is left untouched).
+
+    python benchmarks/yade_timing_probe.py RUN_DIR [--steps 1000]
+
+Prints the steps per CPU second, the interactions (potential and real) and ``yade.timing.stats()``
+(``O.timingEnabled``: the share of every engine, the orchestrator's PyRunners among them).
+docs/validation.md quotes it for the medium clump triaxial (session 24).
+"""
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+PROBE = '''
+O.timingEnabled = True
+from yade import timing
+_t0, _i0 = time.process_time(), O.iter
+O.run({steps}, True)
+print("PROBE steps per CPU second %.2f; interactions %d, real %d" % (
+    (O.iter - _i0) / (time.process_time() - _t0), len(O.interactions), O.interactions.countReal()), flush=True)
+timing.stats()
+sys.stdout.flush()
+os._exit(0)
+'''
+#: what a resumed YADE deck reads besides its checkpoint
+FILES = ("checkpoint.yade.gz", "clumps.txt", "particles.txt", "params.json", "resume.py", "triax.txt")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run_dir", type=Path)
+    ap.add_argument("--steps", type=int, default=1000)
+    a = ap.parse_args(argv)
+    run = a.run_dir
+    if not (run / "resume.py").exists() or not (run / "checkpoint.yade.gz").exists():
+        print(f"error: {run}: no resume.py and checkpoint.yade.gz here (a YADE run that has checkpointed)", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
+        tmp = Path(tmp)
+        for f in FILES:
+            if (run / f).exists():
+                shutil.copy2(run / f, tmp / f)
+        shutil.copytree(run / "yade_runtime", tmp / "yade_runtime")
+        (tmp / "dump").mkdir()
+        deck = (tmp / "resume.py").read_text()
+        cut = deck.index("_pid_of = dict(")          # after the resume, before the run's own loop
+        (tmp / "probe.py").write_text(deck[:cut] + PROBE.format(steps=int(a.steps)))
+        out = subprocess.run(["yade", "-n", "-j", "1", "-x", "probe.py"], cwd=tmp, capture_output=True, text=True)
+        text = out.stdout[out.stdout.find("PROBE"):] if "PROBE" in out.stdout else out.stdout + out.stderr
+        print(text)
+        return 0 if "PROBE" in out.stdout else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
