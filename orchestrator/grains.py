@@ -199,18 +199,15 @@ def clump_frames(frames: Frames, member_ids, clump) -> Frames:
         density = float(np.median(frames.mass / (4.0 / 3.0 * np.pi * frames.radius ** 3)))
         mass = density * volume
     grain_ids = labels + 1
-    member_sorted = np.sort(frames.ids)
-    member_grain = (labels[g_of_row] + 1)[np.argsort(frames.ids)]      # grain id of each sorted member id
-    member_radius = frames.radius[np.argsort(frames.ids)]
-    contacts = {k: _grain_contacts(frames.contact_arrays(k), member_sorted, member_grain, member_radius)
-                for k in frames.contact_frames}
+    grain_of_row = labels[g_of_row] + 1                                 # grain id of each member row
+    contacts = {k: _grain_contacts(frames, frames.contact_arrays(k), grain_of_row) for k in frames.contact_frames}
     radius = (3.0 * volume / (4.0 * np.pi)) ** (1.0 / 3.0)
     if contacts:
         fields["stress"] = np.full((T, n, 3, 3), np.nan)
         for k, c in contacts.items():
             if "point" not in c:            # a grain's stress needs where its contacts are, not its centre's
                 continue
-            i, j = contacts_to_rows(labels + 1, c["i"], c["j"])
+            i, j = contacts_to_rows(grain_ids, c["i"], c["j"])
             f = np.asarray(c["fn"], float) + (np.asarray(c["ft"], float) if "ft" in c else 0.0)
             fields["stress"][k] = love_weber_stress(position[k], radius, i, j, c["point"], f)
     meta = dict(frames.meta)
@@ -222,24 +219,19 @@ def clump_frames(frames: Frames, member_ids, clump) -> Frames:
                               orientation=orientation, **fields)
 
 
-def _grain_contacts(c: dict, member_sorted, member_grain, member_radius) -> dict:
+def _grain_contacts(frames: Frames, c: dict, grain_of_row: np.ndarray) -> dict:
     """One frame's member contacts ``c`` with i, j replaced by grain ids (walls, negative ids, kept),
     the members' radii [m] as ``radius_i`` / ``radius_j`` (NaN for a wall), contacts inside a clump
-    dropped. ``member_sorted``: the member ids in increasing order, ``member_grain`` and
-    ``member_radius`` in that order."""
-    def lookup(ids, values, default):
-        ids = np.asarray(ids, np.int64)
-        at = np.clip(np.searchsorted(member_sorted, ids), 0, len(member_sorted) - 1)
-        hit = member_sorted[at] == ids
-        return np.where(hit, values[at], default), hit
-
-    gi, hi = lookup(c["i"], member_grain, np.asarray(c["i"], np.int64))
-    gj, hj = lookup(c["j"], member_grain, np.asarray(c["j"], np.int64))
-    if not (hi | (np.asarray(c["i"]) < 0)).all() or not (hj | (np.asarray(c["j"]) < 0)).all():
+    dropped. ``grain_of_row``: the grain id of each particle row of ``frames``."""
+    ci, cj = np.asarray(c["i"], np.int64), np.asarray(c["j"], np.int64)
+    ri, rj = contacts_to_rows(frames, ci, cj)
+    if ((ri < 0) & (ci >= 0)).any() or ((rj < 0) & (cj >= 0)).any():
         raise ValueError("a contact names a particle id that is neither a member sphere nor a wall (negative id)")
+    gi = np.where(ri >= 0, grain_of_row[ri], ci)
+    gj = np.where(rj >= 0, grain_of_row[rj], cj)
     keep = gi != gj
     out = {key: np.asarray(a)[keep] for key, a in c.items()}
     out["i"], out["j"] = gi[keep], gj[keep]
-    out["radius_i"] = lookup(c["i"], member_radius, np.nan)[0][keep]
-    out["radius_j"] = lookup(c["j"], member_radius, np.nan)[0][keep]
+    out["radius_i"] = np.where(ri >= 0, frames.radius[ri], np.nan)[keep]
+    out["radius_j"] = np.where(rj >= 0, frames.radius[rj], np.nan)[keep]
     return out
