@@ -62,7 +62,11 @@ def read_clump_map(run_dir) -> np.ndarray | None:
     f = Path(run_dir) / "clumps.txt"
     if not f.exists():
         return None
-    rows = np.loadtxt(f, ndmin=2, comments="#", dtype=np.int64)
+    try:
+        rows = np.loadtxt(f, ndmin=2, comments="#", dtype=np.int64)
+    except ValueError as exc:
+        raise ValueError(f"{f}: not a clump map ({exc}); it lists one member sphere a line: "
+                         "member id, clump index (integers), as the run wrote it") from None
     if rows.shape[1] != 2:
         raise ValueError(f"{f}: expected two columns (member id, clump index), got {rows.shape[1]}")
     return rows

@@ -187,6 +187,9 @@ def test_frames_for_analysis_reads_grains_when_the_run_has_clumps(tmp_path):
     assert all(e["status"] == "ok" for e in out.values()), json.dumps(out, default=str)[:2000]
     with pytest.raises(ValueError, match="in no clump"):
         clump_frames(fr, ids[1:], clump[1:])
+    (tmp_path / "clumps.txt").write_text("member clump\n1 x\n")
+    with pytest.raises(ValueError, match="clumps.txt: not a clump map"):
+        frames_for_analysis(tmp_path)
 
 
 def test_analyze_redoes_a_complete_clump_run_on_grains_and_keeps_its_record(tmp_path, capsys):
