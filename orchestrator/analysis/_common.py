@@ -14,7 +14,8 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-__all__ = ["Result", "present", "d50", "control_values", "frame_pairs", "frame_indices",
+__all__ = ["Result", "present", "d50", "control_values", "frame_pairs", "frame_indices", "loading_frames",
+           "stage_frames",
            "atomic_write_csv", "atomic_savefig", "atomic_write_json", "sphere_volume"]
 
 
@@ -118,24 +119,58 @@ def frame_indices(frames, at=None, control=None, stride: int = 1) -> list[int]:
     return out
 
 
-def frame_pairs(frames, pairs=None, interval=None, start=None, control=None, stride: int = 1) -> list[tuple[int, int]]:
+def loading_frames(frames) -> list[int]:
+    """Frame indices of the loading stage: its reference state (the last frame before the final
+    stage begins: the end of isotropic compression in a triaxial run, the piston at rest before the
+    rotation in a shear cell) and every frame after it.
+
+    Both scenes write a ``stage`` control whose last value is the loading (triaxial: 1 isotropic,
+    2 loading; shear cell: 0-2 filling and compression, 3 shearing). Frames without a ``stage``
+    control, or with a single stage, are all loading frames.
+    """
+    T = frames.n_frames
+    st = np.asarray(frames.controls["stage"], float) if "stage" in frames.controls else None
+    if st is None or not np.isfinite(st).any():
+        return list(range(T))
+    first = int(np.flatnonzero(np.isfinite(st))[-1])
+    while first > 0 and st[first - 1] == st[first]:    # back to the start of the final stage
+        first -= 1
+    return list(range(max(first - 1, 0), T))
+
+
+def stage_frames(frames, stages: str = "loading") -> list[int]:
+    """Frame indices of ``stages``: "loading" (:func:`loading_frames`) or "all"."""
+    if stages == "loading":
+        return loading_frames(frames)
+    if stages == "all":
+        return list(range(frames.n_frames))
+    raise ValueError(f"stages must be 'loading' or 'all', got {stages!r}")
+
+
+def frame_pairs(frames, pairs=None, interval=None, start=None, control=None, stride: int = 1,
+                stages: str = "loading") -> list[tuple[int, int]]:
     """(reference, current) frame index pairs for incremental measures.
 
     - ``pairs``: explicit ``[[k0, k1], ...]``;
     - ``interval``: a control increment (e.g. 0.01 axial strain, seed 001 uses 1 %): for every
-      start state (``start`` list of control values, default every frame) the current frame is the
-      one nearest to control + interval;
-    - default: consecutive frames ``(k, k + stride)``.
+      start state (``start`` list of control values, default every ``stride``-th frame of the
+      stages chosen) the current frame is the one nearest to control + interval;
+    - default: consecutive frames ``(k, k + stride)`` of the stages chosen.
+
+    ``stages``: "loading" (default; :func:`loading_frames`: seed 001 measures D²min while
+    loading, not while the sample is prepared) or "all" (the preparation stages too). Explicit
+    ``pairs`` and ``start`` are taken as given.
     """
     T = frames.n_frames
     if T < 2:
         raise ValueError(f"{frames.path}: an incremental measure needs at least 2 frames, got {T}")
     if pairs is not None:
         return [(range(T)[int(a)], range(T)[int(b)]) for a, b in pairs]
+    usable = stage_frames(frames, stages)
+    s = max(int(stride), 1)
     if interval is not None:
         _, vals = control_values(frames, control)
-        starts = (frame_indices(frames, start, control) if start is not None
-                  else list(range(0, T, max(int(stride), 1))))
+        starts = (frame_indices(frames, start, control) if start is not None else usable[::s])
         out = []
         for k0 in starts:
             target = vals[k0] + float(interval)
@@ -144,10 +179,14 @@ def frame_pairs(frames, pairs=None, interval=None, start=None, control=None, str
                 out.append((k0, k1))
         if not out:
             raise ValueError(f"no frame pair spans a control interval of {interval} (control range "
-                             f"{np.nanmin(vals):g} .. {np.nanmax(vals):g})")
+                             f"{np.nanmin(vals[usable]):g} .. {np.nanmax(vals[usable]):g} in the "
+                             f"{stages} frames)")
         return out
-    s = max(int(stride), 1)
-    return [(k, k + s) for k in range(0, T - s, s)]
+    out = [(usable[i], usable[i + s]) for i in range(0, len(usable) - s, s)]
+    if not out:
+        raise ValueError(f"{frames.path}: the {stages} stage has {len(usable)} frame(s); an incremental "
+                         f"measure needs at least {s + 1} (stages='all' takes the preparation too)")
+    return out
 
 
 # ----------------------------------------------------------------------------- atomic output

@@ -76,7 +76,8 @@ def analyze_clusters(frames, top_fraction: float = 0.1, cutoff: float | None = N
 
     Options: ``top_fraction`` (seed 0.1), ``cutoff`` [m] / ``cutoff_d50`` (joining distance,
     default 1.5 d50), ``s_min`` (power-law fit), ``s_min_rg`` (fractal fit), and the D²min
-    options (``pairs``, ``interval``, ``start``, ``control``, ``stride``, D²min ``d2min_cutoff``).
+    options (``pairs``, ``interval``, ``start``, ``control``, ``stride``, ``stages``, D²min
+    ``d2min_cutoff``).
     A precomputed :func:`.d2min.analyze_d2min` result may be passed as ``d2min_result``.
 
     Tables: ``clusters`` (frame0, frame1, label, size, volume, x, y, z, rg), ``size_distribution``

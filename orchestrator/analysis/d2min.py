@@ -86,15 +86,16 @@ def local_strain(F: np.ndarray) -> dict:
 def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, pairs=None,
                   interval: float | None = None, start=None, control: str | None = None,
                   stride: int = 1, min_neighbors: int = 3, wall_distance: float | None = None,
-                  container=None) -> Result:
+                  container=None, stages: str = "loading") -> Result:
     """D²min, Λ and ε_q for frame pairs of a run (seed 001, eqs. 9-12).
 
     Options
     -------
     cutoff : neighbour cutoff [m]; default ``cutoff_d50`` × d50 (seed: 1.5 d50, the first
         minimum of g(r)).
-    pairs / interval / start / control / stride : which (reference, current) frames, see
-        :func:`orchestrator.analysis._common.frame_pairs` (seed: interval 0.01 axial strain).
+    pairs / interval / start / control / stride / stages : which (reference, current) frames, see
+        :func:`orchestrator.analysis._common.frame_pairs` (seed: interval 0.01 axial strain; by
+        default only the loading stage, ``stages="all"`` adds the preparation).
     wall_distance / container : only particles at least ``wall_distance`` [m] from the container
         boundary get a value (see :func:`d2min`).
 
@@ -110,7 +111,7 @@ def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, 
     cname, cvals = control_values(frames, control)
     pos = frames.position
     rows, summ = [], []
-    for k0, k1 in frame_pairs(frames, pairs, interval, start, control, stride):
+    for k0, k1 in frame_pairs(frames, pairs, interval, start, control, stride, stages):
         r = d2min(pos[k0], pos[k1], cut, min_neighbors=min_neighbors, wall_distance=wall_distance,
                   container=container)
         df = pd.DataFrame({
@@ -133,5 +134,5 @@ def analyze_d2min(frames, cutoff: float | None = None, cutoff_d50: float = 1.5, 
                                    "summary": pd.DataFrame(summ)},
                   scalars={"cutoff_m": cut, "d50_m": dd, "control": cname},
                   options={"cutoff": cut, "pairs": pairs, "interval": interval, "control": cname,
-                           "wall_distance": wall_distance},
+                           "wall_distance": wall_distance, "stages": stages},
                   plotter=plot_d2min)

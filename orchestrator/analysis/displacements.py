@@ -20,11 +20,12 @@ def incremental_displacements(p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
 
 
 def analyze_displacements(frames, pairs=None, interval=None, start=None, control: str | None = None,
-                          stride: int = 1, bins: int = 50, log_bins: bool = True) -> Result:
+                          stride: int = 1, bins: int = 50, log_bins: bool = True,
+                          stages: str = "loading") -> Result:
     """Per-particle incremental displacements, their PDF and box-chart statistics per increment.
 
     Options: frame pairs as in D²min (``pairs``, ``interval`` e.g. 0.01 axial strain, ``start``,
-    ``control``, ``stride``); ``bins`` and ``log_bins`` for the PDF of |u|/d50.
+    ``control``, ``stride``, ``stages``: the loading stage by default); ``bins`` and ``log_bins`` for the PDF of |u|/d50.
 
     Tables: ``particles`` (frame0, frame1, id, x, y, z, ux, uy, uz [m], u [m], u_d50),
     ``pdf`` (frame0, frame1, u_d50 bin centre, pdf), ``stats`` (per pair: mean, std, quartiles,
@@ -34,7 +35,7 @@ def analyze_displacements(frames, pairs=None, interval=None, start=None, control
     cname, cvals = control_values(frames, control)
     pos = frames.position
     parts, pdfs, stats = [], [], []
-    for k0, k1 in frame_pairs(frames, pairs, interval, start, control, stride):
+    for k0, k1 in frame_pairs(frames, pairs, interval, start, control, stride, stages):
         u = incremental_displacements(pos[k0], pos[k1])
         m = present(pos[k0]) & present(pos[k1])
         un = np.linalg.norm(u[m], axis=1)
@@ -57,5 +58,5 @@ def analyze_displacements(frames, pairs=None, interval=None, start=None, control
     return Result("displacements", tables={"particles": pd.concat(parts, ignore_index=True),
                                            "pdf": pd.concat(pdfs, ignore_index=True) if pdfs else pd.DataFrame(),
                                            "stats": pd.DataFrame(stats)},
-                  scalars={"d50_m": dd, "control": cname}, options={"pairs": pairs, "interval": interval},
+                  scalars={"d50_m": dd, "control": cname}, options={"pairs": pairs, "interval": interval, "stages": stages},
                   plotter=plot_displacements)

@@ -135,14 +135,16 @@ def angular_profiles(p0, p1, center, drive: float, radii, dr: float, z_edges, z_
 def analyze_shearband(frames, radii=None, dr: float | None = None, n_radii: int = 4, center="fit",
                       z_ref: float = 0.0, z_range=None, bins_z: int = 30, pairs=None, interval=None,
                       stride: int = 1, control: str | None = None, drive="angle",
-                      steady_from: float | None = None, top_fraction: float = 0.1) -> Result:
+                      steady_from: float | None = None, top_fraction: float = 0.1,
+                      stages: str = "loading") -> Result:
     """Shear band z_sb, w_sb over time and z_sb(r̃) at steady state (seed 000, eq. 2).
 
     Options (SI): ``radii`` r̃ [m] (default ``n_radii`` rings between 0.2 and 0.8 of the cell
     radius), ``dr`` ring half-width [m] (default half the ring spacing); ``center``: (x, y) [m],
     "axis" (bounding-box centre) or "fit" (rigid-rotation fit to the top ``top_fraction`` of
     particles by height, which co-rotate with the upper piston); ``z_ref`` (seed: vanes' top edge);
-    ``z_range``, ``bins_z``; frame pairs as in D²min (``pairs``/``interval``/``stride``);
+    ``z_range``, ``bins_z``; frame pairs as in D²min (``pairs``/``interval``/``stride``/``stages``:
+    by default from the piston at rest before the rotation on);
     ``drive``: name of the control holding the driving rotation [rad] (default "angle"), a number
     [rad] per pair, or "max" (normalise by the largest bin mean); ``steady_from``: control value
     from which the state is steady (seed 000: 10° = 0.1745 rad).
@@ -153,7 +155,7 @@ def analyze_shearband(frames, radii=None, dr: float | None = None, n_radii: int 
     """
     cname, cvals = control_values(frames, control)
     pos = frames.position
-    prs = frame_pairs(frames, pairs, interval, None, control, stride)
+    prs = frame_pairs(frames, pairs, interval, None, control, stride, stages)
     if isinstance(drive, str) and drive in frames.controls:
         # only pairs across which the cell turned (frames before shearing have no rotation)
         prs = [(a, b) for a, b in prs if frames.controls[drive][b] != frames.controls[drive][a]]

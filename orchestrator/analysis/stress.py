@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from ._common import Result, control_values, d50, frame_indices, present, sphere_volume
+from ._common import Result, control_values, d50, frame_indices, present, stage_frames, sphere_volume
 from .neighbors import contacts_to_rows
 from .d2min import d2min
 
@@ -92,12 +92,14 @@ def volatility(q: np.ndarray) -> np.ndarray:
 
 
 def analyze_stress(frames, window=None, interval: float | None = None, at=None, control: str | None = None,
-                   d2min_cutoff_d50: float = 1.5, d2min_cutoff: float | None = None) -> Result:
+                   d2min_cutoff_d50: float = 1.5, d2min_cutoff: float | None = None,
+                   stages: str = "loading") -> Result:
     """q per particle and state, volatility V over a window, and corr(V, D²min) (seed 001, eqs. 14-15, Fig. 16).
 
     Options: ``window`` (control range (lo, hi), seed: (0.10, 0.20) axial strain; default all
-    frames), ``interval`` (control step between states, seed 2.5e-3; default every frame in the
-    window), or explicit ``at`` (frame indices or control values); ``control``. D²min is taken
+    frames of the loading stage, ``stages="all"`` adds the preparation: :func:`._common.stage_frames`),
+    ``interval`` (control step between states, seed 2.5e-3; default every frame in the window), or
+    explicit ``at`` (frame indices or control values); ``control``. D²min is taken
     over the whole window (first to last state) with ``d2min_cutoff`` [m] (default 1.5 d50).
 
     Tables: ``q`` (frame, control, id, q [Pa]), ``volatility`` (id, V, d2min [m²]),
@@ -108,7 +110,7 @@ def analyze_stress(frames, window=None, interval: float | None = None, at=None, 
     if at is not None:
         ks = frame_indices(frames, at, control)
     else:
-        ks = np.arange(frames.n_frames)
+        ks = np.asarray(stage_frames(frames, stages), int)
         if window is not None:
             lo, hi = window
             ks = ks[(cvals >= lo - 1e-12) & (cvals <= hi + 1e-12)]
@@ -139,4 +141,5 @@ def analyze_stress(frames, window=None, interval: float | None = None, at=None, 
     vt = vt[np.isfinite(vt["V"])]
     su = qt.groupby(["frame", "control"])["q"].agg(["mean", "median"]).reset_index()
     return Result("stress", tables={"q": qt, "volatility": vt, "summary": su}, scalars=scal,
-                  options={"window": window, "interval": interval, "control": cname}, plotter=plot_stress)
+                  options={"window": window, "interval": interval, "control": cname, "stages": stages},
+                  plotter=plot_stress)

@@ -80,3 +80,35 @@ def test_analyze_d2min_on_frames(tmp_path):
     assert np.allclose(v, 0.99)
     assert t["d2min"].max() < 1e-20
     assert len(res.tables["summary"]) == 2
+
+
+def test_incremental_measures_default_to_the_loading_stage():
+    """Seed 001 measures D²min while loading: a triaxial run's isotropic stage (stage 1, ε_a < 0)
+    is left out unless asked for, and the state ending it (ε_a = 0) is the first reference."""
+    from orchestrator.analysis import frame_pairs
+    from orchestrator.analysis._common import loading_frames
+    p0 = _random_packing(600, seed=5)
+    eps = np.array([-0.03, -0.02, -0.01, 0.0, 0.01, 0.02, 0.03])
+    stage = np.array([1, 1, 1, 1, 2, 2, 2])
+    # preparation: isotropic shrinkage plus noise (non-affine); loading: affine axial compression
+    rng = np.random.default_rng(6)
+    pos = [p0 * (1 + 0.5 * e) + rng.normal(scale=0.01 * D, size=p0.shape) for e in eps[stage == 1]]
+    pos += [pos[-1] * np.array([1 + 0.25 * e, 1 + 0.25 * e, 1 - e]) for e in eps[stage == 2]]
+    f = Frames.from_arrays(np.stack(pos), np.full(600, D / 2),
+                           controls={"axial_strain": eps, "stage": stage.astype(float)})
+    assert loading_frames(f) == [3, 4, 5, 6]
+    assert frame_pairs(f, interval=0.01) == [(3, 4), (4, 5), (5, 6)]
+    assert frame_pairs(f) == [(3, 4), (4, 5), (5, 6)]
+    assert frame_pairs(f, interval=0.01, stages="all")[0] == (0, 1)
+    r = analyze_d2min(f, interval=0.01)
+    s = r.tables["summary"]
+    assert s["control0"].min() == 0.0
+    # frames 4..6 are affine images of frame 3's positions: D²min vanishes on the loading pairs
+    assert s["d2min_p90"].max() < 1e-20
+    r_all = analyze_d2min(f, interval=0.01, stages="all")
+    assert r_all.tables["summary"]["d2min_p90"].max() > 1e-6 * D ** 2
+    with pytest.raises(ValueError, match="stages must be"):
+        frame_pairs(f, stages="loadin")
+    # no stage control: every frame counts
+    g = Frames.from_arrays(np.stack(pos), np.full(600, D / 2), controls={"axial_strain": eps})
+    assert loading_frames(g) == list(range(7))
