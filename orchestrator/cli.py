@@ -10,6 +10,7 @@ import json
 import sys
 from pathlib import Path
 
+from .analysis_specs import parse_cli_spec, parse_specs
 from .console import console
 from .registry import engine_names, get_engine
 
@@ -242,7 +243,12 @@ def cmd_analyze(args) -> int:
         print(f"error: {run_dir}: not a run directory (no frames.h5); it holds the runs "
               f"{', '.join(str(p) for p in inside)}: give one of them", file=sys.stderr)
         return 2
-    specs = args.analysis
+    try:
+        specs = [parse_cli_spec(a) for a in args.analysis or []]
+        parse_specs(specs)
+    except ValueError as e:
+        print(f"error: --analysis {e}", file=sys.stderr)
+        return 2
     if not specs:
         case_file = run_dir / "case.yaml"
         specs = yaml.safe_load(case_file.read_text()).get("analysis", []) if case_file.exists() else []
@@ -325,7 +331,8 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
 
     a = sub.add_parser("analyze", help="run analyses on a run directory or CT frame set")
     a.add_argument("run_dir")
-    a.add_argument("--analysis", action="append", help="analysis name (repeatable); default: the case's list")
+    a.add_argument("--analysis", action="append", help="analysis name, or name:JSON options, e.g. "
+                   "'stress:{\"window\": [0.1, 0.2]}' (repeatable); default: the case's list")
     a.add_argument("--out", help="output directory (default RUN_DIR/analysis)")
     a.set_defaults(func=cmd_analyze)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import sys
 
+from ..analysis_specs import parse_cli_spec
 from . import ANALYSES, run_analyses
 
 
@@ -17,10 +18,11 @@ def main(argv=None) -> int:
         print(__doc__)
         print("analyses:", ", ".join(sorted(ANALYSES)))
         return 0 if argv and argv[0] in ("-h", "--help") else 2
-    specs = []
-    for a in argv[2:] or sorted(ANALYSES):
-        name, _, opts = a.partition(":")
-        specs.append({name: json.loads(opts)} if opts else name)
+    try:
+        specs = [parse_cli_spec(a) for a in argv[2:] or sorted(ANALYSES)]
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     summary = run_analyses(argv[0], specs, argv[1])
     print(json.dumps({k: {kk: v[kk] for kk in ("status", "seconds", "files") if kk in v} | ({"error": v["error"]} if "error" in v else {})
                       for k, v in summary.items()}, indent=2, default=str))

@@ -113,7 +113,7 @@ def analyze_stress(frames, window=None, interval: float | None = None, at=None, 
         ks = np.asarray(stage_frames(frames, stages), int)
         if window is not None:
             lo, hi = window
-            ks = ks[(cvals >= lo - 1e-12) & (cvals <= hi + 1e-12)]
+            ks = ks[(cvals[ks] >= lo - 1e-12) & (cvals[ks] <= hi + 1e-12)]
         if interval is not None and len(ks):
             targets = np.arange(cvals[ks[0]], cvals[ks[-1]] + 0.5 * interval, interval)
             ks = np.unique([ks[np.argmin(np.abs(cvals[ks] - t))] for t in targets])

@@ -169,3 +169,23 @@ def test_force_chain_detects_a_loaded_column():
     out = force_chains(p, stress, i, j)
     assert (out["labels"][:6] == 0).all() and (out["labels"][6:] == -1).all()
     assert out["links"][:5].all() and not out["links"][5:].any()
+
+
+def test_stress_reads_the_loading_stage_and_its_window(tmp_path):
+    """Two isotropic frames (stage 1, ε_a < 0) before eight loading frames: the default and a
+    window both start at the loading's reference state (ε_a = 0), ``stages="all"`` adds them."""
+    rng = np.random.default_rng(1)
+    n, T = 400, 10
+    p0 = rng.uniform(0, 10 * D, (n, 3))
+    pos = np.stack([p0 + rng.normal(scale=0.01 * D, size=(n, 3)) for _ in range(T)])
+    q = np.exp(np.cumsum(rng.normal(size=(T, n)) * 0.1, axis=0)) * 1e3
+    stress = np.zeros((T, n, 3, 3))
+    stress[..., 0, 1] = stress[..., 1, 0] = q
+    eps = 0.0025 * (np.arange(T) - 2.0)
+    stage = np.where(np.arange(T) < 3, 1.0, 2.0)           # frame 2 (ε_a = 0) ends stage 1
+    fr = Frames.from_arrays(pos, np.full(n, 0.5 * D), controls={"axial_strain": eps, "stage": stage},
+                            stress=stress)
+    assert analyze_stress(fr).scalars["frame_first"] == 2
+    assert analyze_stress(fr, stages="all").scalars["frame_first"] == 0
+    r = analyze_stress(fr, window=(0.005, 0.0175), interval=0.005)
+    assert (r.scalars["frame_first"], r.scalars["frame_last"], r.scalars["n_states"]) == (4, 8, 3)     # ε_a 0.5, 1.0, 1.5 %
