@@ -54,7 +54,7 @@ import math
 import os
 import platform
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +66,7 @@ from .attempts import read_attempts, run_cost
 from .resources import data_file
 
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "engine_seconds", "expected_steps", "step_plan",
-           "samples_from_runs", "fit",
+           "samples_from_runs", "fit", "planned_steps",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
            "speed_ratio", "run_engine_seconds", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
@@ -401,7 +401,10 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         tp = scenes[used]
         basis = (f"measured on {tp.runs} {engine} {scene} run(s)" if used == scene else
                  f"no {scene} run measured on {engine}: the {used} entry, {tp.runs} run(s)")
-        return scale * tp.engine_time(n_particles, expected_steps(steps, plan, tp), ranks), basis + note
+        n_steps, lead = planned_steps(table, engine, scene, steps, plan)
+        if lead is not None:
+            basis += f", its steps as {lead[0]} took them ({lead[1]:.1f} plan units)"
+        return scale * tp.engine_time(n_particles, n_steps, ranks), basis + note
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
         return (scale * tp.engine_time(n_particles, steps, ranks),
@@ -511,6 +514,36 @@ def _machine_load(attempts: list) -> tuple[float | None, int | None]:
     wall = sum(a["wall_s"] for a in rows)
     cores = max((int(a["cores"]) for a in rows if isinstance(a.get("cores"), int)), default=None)
     return sum(a["load"] * a["wall_s"] for a in rows) / wall, cores
+
+
+def planned_steps(table: dict, engine: str, key: str, budget: int, plan) -> tuple[int, tuple[str, float] | None]:
+    """(steps a run of ``key`` on ``engine`` is expected to take [-], the (engine, units) they were
+    counted from when another engine's runs of exactly ``key`` stand in for this one's, else None):
+    :func:`expected_steps` with the engine's own entry for ``key``, or, while ``key`` has none on
+    it (:func:`table_entry_key` falls back to a plainer variant), the units another engine measured
+    on ``key`` itself (:func:`_units_measured_elsewhere`)."""
+    entries = table.get(engine, {})
+    used = table_entry_key(entries, key)
+    tp = entries[used] if used else None
+    lead = _units_measured_elsewhere(table, key, engine) if used != key else None
+    if lead is not None and plan is not None:
+        tp = replace(tp, units=lead[1]) if tp is not None else Throughput(0.0, 0.0, 0.0, units=lead[1])
+        return expected_steps(budget, plan, tp), lead
+    return expected_steps(budget, plan, tp), None
+
+
+def _units_measured_elsewhere(table: dict, key: str, engine: str) -> tuple[str, float] | None:
+    """(engine, units) of another engine's runs of exactly ``key`` whose step plan was measured:
+    how many steps a scene takes to converge is the scene's physics (a clump sample's stage 1 took
+    9.7 pressure-ramp lengths on LIGGGHTS, the sphere samples' 2.5-4.2 on either engine), so an
+    engine that has not run that variant yet counts its steps from the one that has, and its cost
+    per step from its own nearest entry. The engine with the most such runs leads; None without."""
+    found = [(tp.runs, e, tp.units) for e, entries in table.items() if e != engine and isinstance(entries, dict)
+             for k, tp in entries.items() if k == key and tp.units is not None]
+    if not found:
+        return None
+    _, e, units = max(found)
+    return e, float(units)
 
 
 def clock_key(kind: str, engine: str, substitutes: dict | None = None, scene: dict | None = None) -> str:

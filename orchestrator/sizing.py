@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import time
 
-from .clock import clock_key, estimate_engine_time, expected_steps, load_table, step_plan, table_entry
+from .clock import clock_key, estimate_engine_time, load_table, planned_steps, step_plan
 from .registry import get_engine
 
 #: the orchestrator's packing and particle table [bytes per particle]
@@ -67,7 +67,7 @@ def step_budget(sc: dict, plan) -> int:
 
 def estimate(case, params: dict, engine: str) -> dict:
     """Size of one run: ``particles``, ``steps`` (the budget), ``steps_expected`` (what the engine's
-    measured runs of the scene took, :func:`orchestrator.clock.expected_steps`), ``frames``, ``memory_bytes`` (the larger of the
+    measured runs of the scene took, :func:`orchestrator.clock.planned_steps`), ``frames``, ``memory_bytes`` (the larger of the
     engine and the parse), ``disk_bytes`` (frames.h5), ``engine_time_s``."""
     sc = params["scene"]
     n = integrated_particles(params)
@@ -80,7 +80,7 @@ def estimate(case, params: dict, engine: str) -> dict:
     table = load_table()
     t_engine, basis = _engine_time(case, params, engine, key, steps, plan, table, machine_speed=True)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
-    steps_expected = expected_steps(steps, plan, table_entry(table.get(engine, {}), key))
+    steps_expected, _ = planned_steps(table, engine, key, steps, plan)
     engine_mem = eng.base_bytes + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,

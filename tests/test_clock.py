@@ -9,7 +9,8 @@ from dataclasses import asdict
 import numpy as np
 import pytest
 
-from orchestrator.clock import RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, refresh
+from orchestrator.clock import (RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
+                                refresh, step_plan)
 from orchestrator.sizing import busy_cores, busy_note
 
 
@@ -444,3 +445,27 @@ def test_clump_samples_are_their_own_clock_entry_and_fall_back_to_their_boundary
     assert t == pytest.approx(1000 * 32000 * 2.2e-6) and basis.startswith("measured on 1 yade")
     recs = [("triaxial", 2000, 1.1, True), ("triaxial:shell_pressure", 2000, 0.35, True)]
     assert speed_factor(recs, "triaxial:shell_pressure+clumps", 32000)[0] == pytest.approx(0.35, rel=0.2)
+
+
+def test_an_unmeasured_variant_counts_its_steps_from_the_engine_that_ran_it():
+    """How many steps a triaxial's stage 1 takes is the sample's physics: a clump sample took 9.7
+    pressure-ramp lengths on LIGGGHTS where spheres take 2.5-4.2 on either engine. YADE without a
+    clump run of its own keeps its sphere entry's cost per step but counts the steps LIGGGHTS' clump
+    runs took, and says so; once it has its own entry, its own units count."""
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    case = load_case("cases/triaxial_smoke.yaml")
+    plan = step_plan("triaxial", derive(case)["scene"])
+    key = "triaxial:shell_pressure+clumps"
+    sphere = Throughput(1.0, 1e-4, 1e-6, runs=3, units=2.5)
+    clumps_elsewhere = Throughput(1.0, 1e-4, 1e-6, runs=2, units=9.7)
+    table = {"yade": {"triaxial": sphere}, "liggghts": {key: clumps_elsewhere}}
+    budget = plan.steps(plan.max_units)
+    steps, lead = planned_steps(table, "yade", key, budget, plan)
+    assert lead == ("liggghts", 9.7) and steps == plan.steps(9.7) > plan.steps(2.5)
+    t, basis = estimate_engine_time("yade", key, 300, budget, table=table, plan=plan, machine_speed=False)
+    assert t == pytest.approx(sphere.engine_time(300, plan.steps(9.7)))
+    assert "its steps as liggghts took them (9.7 plan units)" in basis
+    table["yade"][key] = Throughput(1.0, 1e-4, 1e-6, runs=1, units=6.0)          # YADE's own clump run
+    assert planned_steps(table, "yade", key, budget, plan) == (plan.steps(6.0), None)
+    assert planned_steps(table, "yade", "triaxial", budget, plan) == (plan.steps(2.5), None)
