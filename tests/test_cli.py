@@ -39,6 +39,32 @@ def test_missing_case_file_is_a_clear_error(tmp_path):
     assert out.returncode == 2 and "file not found" in out.stderr and "Traceback" not in out.stderr
 
 
+def test_analyze_takes_options_and_says_what_is_wrong_with_them(tmp_path, capsys):
+    """``--analysis 'name:{JSON}'`` runs the analysis with those options; a bad name or JSON is one
+    message naming it, no traceback."""
+    import json
+    import numpy as np
+    from orchestrator.frames import write_frames
+    rng = np.random.default_rng(0)
+    n, T = 300, 3
+    p0 = rng.uniform(0, 1e-3, (n, 3))
+    pos = np.stack([p0 * (1 + 0.001 * k) for k in range(T)])
+    run = tmp_path / "run"
+    run.mkdir()
+    write_frames(run / "frames.h5", np.arange(n), np.full(n, 2e-5), np.arange(T), pos,
+                 controls={"axial_strain": 0.001 * np.arange(T)})
+    from orchestrator.cli import main       # in this process: the analysis stack is imported once
+    assert main(["analyze", str(run), "--out", str(tmp_path / "out"), "--analysis", 'd2min:{"pairs": [[0, 2]]}']) == 0
+    d2 = json.loads((tmp_path / "out" / "analysis_summary.json").read_text())["d2min"]
+    assert d2["status"] == "ok" and d2["options"] == {"pairs": [[0, 2]]}
+    capsys.readouterr()
+    for bad, says in (('d2min:{"pairs": [[0, 2]]', "not JSON"), ("d2mn", "unknown analysis 'd2mn'"),
+                      ("d2min:[1]", "must be a JSON object")):
+        assert main(["analyze", str(run), "--analysis", bad]) == 2
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err, err
+
+
 @pytest.mark.engine
 def test_engines_lists_versions_and_capabilities(engines_installed):
     out = cli("engines")
