@@ -73,7 +73,8 @@ def plot_d2min(res, **kw):
         _log_pdf(a2, g["eps_q"], lab, color=col)
     a1.set_xlabel(r"$D^2_{min}/d_{50}^2$"); a1.set_ylabel("PDF")
     a2.set_xlabel(r"local deviatoric strain $\varepsilon_q$"); a2.set_ylabel("PDF")
-    a1.legend(fontsize=7, title=res.scalars.get("control", ""))
+    if a1.get_legend_handles_labels()[0]:     # no curve when every D²min vanished (an affine motion)
+        a1.legend(fontsize=7, title=res.scalars.get("control", ""))
     return fig
 
 
