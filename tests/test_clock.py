@@ -407,12 +407,16 @@ def test_a_quiet_run_stands_in_for_those_that_shared_the_machine():
 
 
 def test_yades_triaxial_on_the_shell_is_its_own_clock_entry():
-    from orchestrator.clock import base_kind, clock_key, speed_factor
+    from orchestrator.clock import base_kind, clock_key, key_fallbacks, speed_factor
     shell = {"yade.membrane": "shell_pressure", "liggghts.membrane": "shell_pressure"}
     assert clock_key("triaxial", "yade", shell) == "triaxial:shell_pressure"
     assert clock_key("triaxial", "yade", {"liggghts.membrane": "shell_pressure"}) == "triaxial"   # PFacet
     assert clock_key("triaxial", "liggghts", shell) == "triaxial:shell_pressure"
-    assert clock_key("shear_cell", "yade", shell) == "shear_cell"
+    # a shear cell's frictionless sidewall is LIGGGHTS' analytic cylinder: a key of its own, which the
+    # other engines' unchanged decks share until they have runs of it (then "shear_cell")
+    assert clock_key("shear_cell", "yade", shell) == "shear_cell:smooth_sidewall"
+    assert clock_key("shear_cell", "liggghts", {}, {"wall_friction": "shear"}) == "shear_cell"
+    assert key_fallbacks("shear_cell:smooth_sidewall") == ["shear_cell:smooth_sidewall", "shear_cell"]
     assert base_kind("triaxial:shell_pressure") == "triaxial"
     # the membrane costs 3x the shell a step (28 Nov 2026): each boundary's runs set its own factor,
     # and a variant not yet measured falls back to its scene's runs

@@ -610,6 +610,14 @@ class ShearCellScene(base.Scene):
     wall_columns = ("step", "z_lower", "fx_lower", "fy_lower", "fz_lower", "tz_lower", "tz_upper", "tz_cylinder")
     observables = ("torque", "angle")
 
+    def clock_features(self, scene):
+        """``smooth_sidewall`` while the walls are frictionless (``wall_friction`` off, seed §3.3):
+        LIGGGHTS then renders the sidewall as its analytic cylinder, which made the default cell's
+        whole run 1.6x faster than the 720-triangle mesh a frictional, rotating sidewall needs
+        (docs/speed.md); the other engines' decks do not change, and their keys fall back to
+        ``shear_cell`` (:func:`orchestrator.clock.key_fallbacks`)."""
+        return () if (scene or {}).get("wall_friction") else ("smooth_sidewall",)
+
     def size_overrides(self, section, scale):
         """The cell's diameter × ``scale`` at the same fill height, vanes and gap (the grain count
         grows as scale²; an explicit ``n_particles`` with it)."""
