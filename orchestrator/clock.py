@@ -230,6 +230,18 @@ def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:
     return smp.engine_s / predicted if predicted > 0 else None
 
 
+def _against(package: dict, engine: str, scene: str) -> str | None:
+    """Which package entry a speed ratio of ``scene`` on ``engine`` is taken against: its key and
+    costs. A refit of the package table (``orchestrator clock refresh --package``, a new variant's
+    own entry where its fallback stood in) changes it, and the ratios recorded against the old entry
+    no longer say this machine's speed (:func:`machine_factor` leaves them out)."""
+    key = table_entry_key(package.get(engine, {}), scene) if scene else None
+    if key is None:
+        return None
+    tp = package[engine][key]
+    return f"{key} {tp.startup_s:.6g} {tp.per_step_s:.6g} {tp.per_particle_step_s:.6g} {tp.exponent:.6g}"
+
+
 def record_speed(run_dir) -> float | None:
     """Record the complete run ``run_dir``'s :func:`speed_ratio` under this machine, with its scene
     and particle count; returns it, or None when the run does not tell (not complete, shared its
@@ -241,10 +253,12 @@ def record_speed(run_dir) -> float | None:
         return None
     table = _speed_table()
     rows = table.setdefault(machine_id(), {}).setdefault(smp.engine, [])
+    against = _against(_as_throughputs(_package_table()), smp.engine, smp.scene)
     rows[:] = [r for r in rows if r.get("run") != str(run_dir)] + [{"run": str(run_dir), "scene": smp.scene,
                                                                       "n": int(smp.n_particles),
                                                                       "ratio": round(ratio, 4),
-                                                                      "quiet": smp.quiet}]
+                                                                      "quiet": smp.quiet,
+                                                                      "against": against}]
     rows[:] = _keep_recent(rows)
     out = speed_table_path()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -375,6 +389,10 @@ def machine_factor(engine: str, scene: str | None = None, n_particles: int | Non
     """(ratio of engine time to the package table's prediction, runs it rests on) of ``engine`` on
     this machine (:func:`record_speed`), by :func:`speed_factor`; None before a run has been recorded."""
     rows = _speed_table().get(machine_id(), {}).get(engine) or []
+    package = _as_throughputs(_package_table())
+    # a ratio recorded against a package entry since refitted says nothing of this machine (rows of
+    # before the record kept its entry have no "against")
+    rows = [r for r in rows if r.get("against") is None or r["against"] == _against(package, engine, r.get("scene"))]
     return speed_factor([(r.get("scene"), r.get("n"), r["ratio"], r.get("quiet")) for r in rows
                          if isinstance(r.get("ratio"), (int, float))], scene, n_particles)
 

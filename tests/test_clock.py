@@ -473,3 +473,37 @@ def test_an_unmeasured_variant_counts_its_steps_from_the_engine_that_ran_it():
     table["yade"][key] = Throughput(1.0, 1e-4, 1e-6, runs=1, units=6.0)          # YADE's own clump run
     assert planned_steps(table, "yade", key, budget, plan) == (plan.steps(6.0), None)
     assert planned_steps(table, "yade", "triaxial", budget, plan) == (plan.steps(2.5), None)
+
+
+def test_ratios_recorded_against_a_since_refitted_entry_are_left_out(tmp_path, monkeypatch):
+    """This machine's speed is a ratio to a package entry: once the entry is refitted (here a new
+    variant gets its own entry where its fallback stood in), the ratios recorded against the old one
+    say nothing and are left out; rows of before the record kept its entry still count."""
+    import orchestrator.clock as clock
+    pkg = tmp_path / "package.json"
+    base = asdict(Throughput(1.0, 1e-4, 1e-6, runs=3))
+    pkg.write_text(json.dumps({"liggghts": {"shear_cell": base}}))
+    monkeypatch.setattr(clock, "package_table_path", lambda: pkg)
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    n, steps, key = 1025, 100_000, "shear_cell:smooth_sidewall"
+    d = tmp_path / "runs" / "a"
+    d.mkdir(parents=True)
+    t = 0.6 * Throughput(**base).engine_time(n, steps)
+    (d / "summary.json").write_text(json.dumps({
+        "engine": "liggghts", "status": "complete", "steps": steps, "steps_run": steps, "n_particles": n,
+        "workers": 1, "clock_key": key, "wall_time": {"engine": t, "engine_loop": t - 1.0}}))
+    (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
+    (d / "case.yaml").write_text("scene: {kind: shear_cell}\n")
+    (d / "attempts.json").write_text(json.dumps([{"cores": 2, "load": 1.0, "wall_s": t, "cpu_s": t, "done": True}]))
+    assert clock.record_speed(d) == pytest.approx(0.6, rel=1e-3)
+    assert clock.machine_factor("liggghts", key, n)[0] == pytest.approx(0.6, rel=1e-3)
+    # the variant's own entry, fitted on this machine's runs: the old ratio no longer applies
+    pkg.write_text(json.dumps({"liggghts": {"shear_cell": base, key: asdict(Throughput(1.0, 6e-5, 6e-7, runs=4))}}))
+    assert clock.machine_factor("liggghts", key, n) is None
+    # a row recorded before rows named their entry still counts
+    table = json.loads((tmp_path / "speed.json").read_text())
+    for rows in table.values():
+        for r in rows["liggghts"]:
+            r.pop("against")
+    (tmp_path / "speed.json").write_text(json.dumps(table))
+    assert clock.machine_factor("liggghts", key, n)[0] == pytest.approx(0.6, rel=1e-3)
