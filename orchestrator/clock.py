@@ -90,6 +90,9 @@ class Throughput:
     #: α of the per-particle term b·n^α [-]: 1 (linear) unless runs of three or more sizes fitted a
     #: power law better (then a = 0 and b is in s/(step·particle^α))
     exponent: float = 1.0
+    #: :func:`machine_id` of the machine whose runs the entry was fitted on ("" before entries said
+    #: so): an estimate from an entry fitted on this machine takes it as it is, like a user table's
+    machine: str = ""
 
     def step_time(self, n_particles: int) -> float:
         """One rank's time per step [s] with ``n_particles``."""
@@ -224,7 +227,7 @@ def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:
         return None
     package = _as_throughputs(_package_table()) if package is None else package
     tp = table_entry(package.get(smp.engine, {}), smp.scene)
-    if tp is None:
+    if tp is None or tp.machine == machine_id():     # an entry fitted here says nothing of this machine's speed
         return None
     predicted = tp.engine_time(smp.n_particles, smp.steps, smp.ranks)
     return smp.engine_s / predicted if predicted > 0 else None
@@ -411,7 +414,8 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     table = load_table(user) if table is None else table
     scenes = table.get(engine, {})
     used = table_entry_key(scenes, scene)
-    if machine_speed and (used or scene) not in user.get(engine, {}):    # a user entry is this machine's
+    fitted_here = used is not None and scenes[used].machine == machine_id()
+    if machine_speed and (used or scene) not in user.get(engine, {}) and not fitted_here:   # a user entry is this machine's
         mf = machine_factor(engine, scene, n_particles)
         if mf is not None:
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
@@ -735,7 +739,7 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False) -> dict:
     fitted: dict = {}
     for (eng, sc), smp in sorted(groups.items()):
         if not steps_only:
-            fitted.setdefault(eng, {})[sc] = fit(smp)
+            fitted.setdefault(eng, {})[sc] = replace(fit(smp), machine=machine_id())
             continue
         units = [x.units for x in smp if x.units is not None]
         entry = (old.get(eng) or {}).get(sc)

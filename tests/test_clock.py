@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
@@ -302,7 +302,7 @@ def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypa
             "engine": "liggghts", "status": "complete", "steps": steps, "steps_run": steps, "n_particles": n,
             "workers": 2, "wall_time": {"engine": t, "engine_loop": t - tp.startup_s}}))
         (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
-        (d / "case.yaml").write_text("scene: {kind: shear_cell}\n")
+        (d / "case.yaml").write_text("scene: {kind: shear_cell, wall_friction: shear}\n")   # the mesh sidewall's key
         (d / "attempts.json").write_text(json.dumps([{"cores": 2, "load": load, "wall_s": t, "done": True}]))
         return record_speed(d)
 
@@ -507,3 +507,10 @@ def test_ratios_recorded_against_a_since_refitted_entry_are_left_out(tmp_path, m
             r.pop("against")
     (tmp_path / "speed.json").write_text(json.dumps(table))
     assert clock.machine_factor("liggghts", key, n)[0] == pytest.approx(0.6, rel=1e-3)
+    # an entry fitted on this machine's own runs (clock refresh): no ratio is recorded against it,
+    # and its estimates take no machine factor
+    here = asdict(replace(Throughput(1.0, 6e-5, 6e-7, runs=4), machine=clock.machine_id()))
+    pkg.write_text(json.dumps({"liggghts": {"shear_cell": base, key: here}}))
+    assert clock.record_speed(d) is None
+    t_here, basis = clock.estimate_engine_time("liggghts", key, n, steps)
+    assert t_here == pytest.approx(Throughput(**here).engine_time(n, steps)) and "machine" not in basis
