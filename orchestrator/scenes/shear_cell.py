@@ -613,7 +613,7 @@ class ShearCellScene(base.Scene):
     def clock_features(self, scene):
         """``smooth_sidewall`` while the walls are frictionless (``wall_friction`` off, seed §3.3):
         LIGGGHTS then renders the sidewall as its analytic cylinder, which made the default cell's
-        whole run 1.6x faster than the 720-triangle mesh a frictional, rotating sidewall needs
+        whole run 1.43x faster than the 720-triangle mesh a frictional, rotating sidewall needs
         (docs/speed.md); the other engines' decks do not change, and their keys fall back to
         ``shear_cell`` (:func:`orchestrator.clock.key_fallbacks`)."""
         return () if (scene or {}).get("wall_friction") else ("smooth_sidewall",)
