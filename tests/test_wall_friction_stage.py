@@ -97,18 +97,21 @@ def _wall_series(run_dir) -> np.ndarray:
 @pytest.mark.usefixtures("engines_installed")
 @pytest.mark.parametrize("engine", ["liggghts", pytest.param("lammps", marks=pytest.mark.slow)])
 def test_sidewall_torque_appears_with_the_shear_stage(engine, tmp_path):
+    """``wall_friction: shear``: the walls are frictionless until the shear stage and frictional
+    from it on. The sidewall (a mesh here: LIGGGHTS takes a sidewall that is frictionless throughout
+    as its analytic cylinder, whose torque column is 0, so a frictionless run is no reference for
+    this mesh) carries before the shear stage only the leak of its flat facets' normal forces about
+    the axis, and in it a friction torque over 10x that (3.9e-11 N m after 2°, 3 % of the upper
+    piston's, on LIGGGHTS, 29 Nov 2026)."""
     # 2 degrees of shear are enough to load the sidewall (the smoke case turns 4)
     short = {"final_angle": "2 deg", "frame_angles": ["1 deg", "2 deg"]}
-    runs = {m: run_case(_case(m, **short), engine, runs_root=tmp_path, analyze=False, progress=False)
-            for m in (False, "shear")}
+    run = run_case(_case("shear", **short), engine, runs_root=tmp_path, analyze=False, progress=False)
     s2 = derive(_case("shear", **short))["scene"]["stages"]["shear"][0]
-    off, on = (_wall_series(runs[m].run_dir) for m in (False, "shear"))
-    assert off.shape == on.shape
-    before = off[:, 0] <= s2
-    np.testing.assert_array_equal(on[before], off[before])
+    on = _wall_series(run.run_dir)
     # columns: step z_lower Fx Fy Fz Tz_lower Tz_upper Tz_cylinder
-    t_off, t_on = (abs(s[~before, 7].mean()) for s in (off, on))
-    assert t_on > 10 * t_off, (t_on, t_off)
+    before = (on[:, 0] <= s2) & (on[:, 0] > 0.8 * s2)          # the end of compression, at rest
+    t_before, t_shear = abs(on[before, 7].mean()), abs(on[on[:, 0] > s2, 7].mean())
+    assert t_shear > 10 * t_before, (t_shear, t_before)
 
 
 YADE_SLIDE = """
