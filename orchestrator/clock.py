@@ -547,11 +547,10 @@ def planned_steps(table: dict, engine: str, key: str, budget: int, plan) -> tupl
     entries = table.get(engine, {})
     used = table_entry_key(entries, key)
     tp = entries[used] if used else None
-    lead = _units_measured_elsewhere(table, key, engine) if used != key else None
-    if lead is not None and plan is not None:
+    lead = _units_measured_elsewhere(table, key, engine) if plan is not None and used != key else None
+    if lead is not None:
         tp = replace(tp, units=lead[1]) if tp is not None else Throughput(0.0, 0.0, 0.0, units=lead[1])
-        return expected_steps(budget, plan, tp), lead
-    return expected_steps(budget, plan, tp), None
+    return expected_steps(budget, plan, tp), lead
 
 
 def _units_measured_elsewhere(table: dict, key: str, engine: str) -> tuple[str, float] | None:
@@ -561,7 +560,7 @@ def _units_measured_elsewhere(table: dict, key: str, engine: str) -> tuple[str, 
     engine that has not run that variant yet counts its steps from the one that has, and its cost
     per step from its own nearest entry. The engine with the most such runs leads; None without."""
     found = [(tp.runs, e, tp.units) for e, entries in table.items() if e != engine and isinstance(entries, dict)
-             for k, tp in entries.items() if k == key and tp.units is not None]
+             for tp in [entries.get(key)] if tp is not None and tp.units is not None]
     if not found:
         return None
     _, e, units = max(found)
