@@ -534,7 +534,13 @@ class _open_h5:
     def __enter__(self):
         try:
             import h5py
-            self.h = h5py.File(self.path, "r")
+            # locking=False: a frames.h5 is written as .partial and renamed once complete, so no
+            # reader ever meets a file being written and HDF5's advisory lock protects nothing here.
+            # It did harm: a process started from another thread (an engine of a threaded sweep)
+            # inherits, until its exec, the descriptor of a frames file being written, with its
+            # exclusive flock, and opening the renamed file for reading then fails with errno 11
+            # (tests/test_frames.py::test_a_finished_file_opens_while_other_threads_start_processes)
+            self.h = h5py.File(self.path, "r", locking=False)
         except OSError as exc:
             raise FramesError(self._msg(exc)) from None
         return self.h

@@ -1,6 +1,9 @@
 """frames.h5: the layout of DESIGN.md, NaN rows, contacts, walls, atomic writes, tables, VTK."""
 from __future__ import annotations
 
+import subprocess
+import threading
+
 import h5py
 import numpy as np
 import pytest
@@ -31,6 +34,28 @@ def test_layout_matches_design(tmp_path):
         assert h["frames/position"].shape == (4, 5, 3)
         assert h["meta"].attrs["engine"] == "test"
         assert "units" in h["meta"].attrs
+
+
+def test_a_finished_file_opens_while_other_threads_start_processes(tmp_path):
+    """A process forked by another thread (a threaded sweep starting an engine) holds, until its exec,
+    a copy of the descriptor of a frames file being written, and with it HDF5's exclusive lock; the
+    renamed, finished file must still open (without locking=False 158 of 400 such loops failed with errno 11)."""
+    stop = threading.Event()
+
+    def start_processes():
+        while not stop.is_set():
+            subprocess.run(["true"])
+
+    starter = threading.Thread(target=start_processes)
+    starter.start()
+    try:
+        for k in range(50):
+            path = tmp_path / f"{k}" / "frames.h5"
+            pos, _ = make(path, T=2, N=3)
+            np.testing.assert_array_equal(load(path).position, pos)
+    finally:
+        stop.set()
+        starter.join()
 
 
 def test_round_trip_and_nan_rows(tmp_path):
