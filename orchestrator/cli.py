@@ -155,12 +155,13 @@ def cmd_clock(args) -> int:
             n = sum(tp.runs for scenes in fitted.values() for tp in scenes.values())
             con.print(f"fitted {sum(len(v) for v in fitted.values())} engine/scene model(s) from {n} complete run(s); "
                       f"wrote {out}")
-    t = Table(title="run-time model: t = startup + steps (a + b n^α) / (1 + e (workers - 1))")
+    t = Table(title="run-time model: t = startup (+ s_n n) + steps (a + b n^α) / (1 + e (workers - 1))")
     for col in ("engine", "scene", "startup [s]", "a [µs/step]", "b [ns/(particle^α step)]", "α", "e", "runs", "note"):
         t.add_column(col)
     for eng, scenes in sorted(load_table().items()):
         for sc, tp in sorted(scenes.items()):
-            t.add_row(eng, sc, f"{tp.startup_s:.2f}", f"{tp.per_step_s * 1e6:.1f}", f"{tp.per_particle_step_s * 1e9:.1f}",
+            start = f"{tp.startup_s:.2f}" + (f" + {tp.startup_per_particle_s * 1e3:.3g} ms n" if tp.startup_per_particle_s else "")
+            t.add_row(eng, sc, start, f"{tp.per_step_s * 1e6:.1f}", f"{tp.per_particle_step_s * 1e9:.1f}",
                       f"{tp.exponent:.2f}", f"{tp.parallel_efficiency:.2f}", str(tp.runs), tp.note)
     con.print(t)
     speeds = {eng: machine_factor(eng) for eng in sorted(load_table())}

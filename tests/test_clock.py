@@ -31,6 +31,20 @@ def test_fit_separates_per_step_and_per_particle_costs():
     assert tp.engine_time(2000, 1000) == pytest.approx(0.5 + 1000 * (2e-4 + 2e-3))
 
 
+def test_a_start_up_that_grows_with_the_grains_is_fitted_and_a_constant_one_stays_constant():
+    """YADE's triaxial set-up took 8, 35 and 54 s with 300, 2 000 and 4 000 grains: a constant
+    start-up (their median) put the 300-grain run's estimate 36 % long."""
+    runs = [replace(r, engine_s=r.loop_s + 4.0 + 0.0125 * r.n_particles) for r in _runs(2e-4, 1e-6, 0.0, [300, 2000, 4000])]
+    tp = fit(runs)
+    assert tp.startup_s == pytest.approx(4.0, rel=1e-6)
+    assert tp.startup_per_particle_s == pytest.approx(0.0125, rel=1e-6)
+    assert tp.engine_time(300, 0) == pytest.approx(4.0 + 0.0125 * 300)
+    assert "per particle" in tp.note
+    flat = fit(_runs(2e-4, 1e-6, 0.5, [300, 2000, 4000]))
+    assert flat.startup_per_particle_s == 0 and flat.startup_s == pytest.approx(0.5)
+    assert Throughput(1.0, 0.0, 1e-6).startup_time(10_000) == 1.0      # entries without it: unchanged
+
+
 def test_parallel_efficiency_is_fitted_from_multi_rank_runs():
     tp = fit(_runs(0.0, 1e-6, 0.5, [300, 1000]) + _runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=0.8))
     assert tp.parallel_efficiency == pytest.approx(0.8, rel=1e-6)
