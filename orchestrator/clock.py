@@ -56,7 +56,7 @@ import math
 import os
 import platform
 import re
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +99,14 @@ class Throughput:
     #: triaxial decks: 8 s with 300 grains, 35 s with 2 000, 54 s with 4 000); 0 when the runs were
     #: of one size or their start-up did not grow with n
     startup_per_particle_s: float = 0.0
+
+    @classmethod
+    def from_dict(cls, entry: dict) -> "Throughput":
+        """An entry of a table as stored; a term a later version added is left out, so that a run
+        started before the table was refitted (a ladder of several hours) still reads it: session
+        26's new start-up term failed two rungs of a running ladder with "unexpected keyword"."""
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in entry.items() if k in known})
 
     def startup_time(self, n_particles: int) -> float:
         """Start-up and set-up [s] with ``n_particles``."""
@@ -184,7 +192,7 @@ def _user_table() -> dict:
 
 
 def _as_throughputs(table: dict) -> dict:
-    return {eng: {sc: Throughput(**d) for sc, d in scenes.items() if not sc.startswith("_")}
+    return {eng: {sc: Throughput.from_dict(d) for sc, d in scenes.items() if not sc.startswith("_")}
             for eng, scenes in table.items() if not eng.startswith("_")}
 
 
@@ -780,7 +788,7 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False) -> dict:
         entry["units"] = med
         entry["note"] = (re.sub(r"; [\d.e+-]+ units \(median of \d+\)", "", entry.get("note", ""))
                          + f"; {med:g} units (median of {len(units)}, steps refreshed alone)")
-        fitted.setdefault(eng, {})[sc] = Throughput(**entry)
+        fitted.setdefault(eng, {})[sc] = Throughput.from_dict(entry)
     for eng, scenes in fitted.items():
         old.setdefault(eng, {}).update({sc: asdict(tp) for sc, tp in scenes.items()})
     out.parent.mkdir(parents=True, exist_ok=True)

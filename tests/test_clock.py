@@ -45,6 +45,11 @@ def test_a_start_up_that_grows_with_the_grains_is_fitted_and_a_constant_one_stay
     assert Throughput(1.0, 0.0, 1e-6).startup_time(10_000) == 1.0      # entries without it: unchanged
 
 
+def test_a_table_entry_with_a_term_this_version_does_not_know_is_read():
+    entry = asdict(Throughput(1.0, 2e-4, 1e-6)) | {"a_later_term_s": 3.0}
+    assert Throughput.from_dict(entry) == Throughput(1.0, 2e-4, 1e-6)
+
+
 def test_parallel_efficiency_is_fitted_from_multi_rank_runs():
     tp = fit(_runs(0.0, 1e-6, 0.5, [300, 1000]) + _runs(0.0, 1e-6, 0.5, [1000], ranks=2, eff=0.8))
     assert tp.parallel_efficiency == pytest.approx(0.8, rel=1e-6)
