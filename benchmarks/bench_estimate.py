@@ -17,6 +17,10 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
   scene where there are any, at this run's size: :func:`orchestrator.clock.speed_factor`, what
   ``run --dry-run`` prints once the machine has recorded them; "n/a" without such a run).
 
+``ms/step`` is the run's own loop time per step (one rank's, as the fit takes it) and ``start s``
+its start-up and set-up (engine time minus loop time): what the table's per-step and start-up
+terms are fitted to.
+
 ``load`` is the machine's mean load average over the run's cores (``orchestrator.attempts``; "-"
 for runs recorded before it was kept). A multi-rank run with a load above its cores by more than
 half a core is marked ``shared``: its wall time (the time that counts for ranks, which poll while
@@ -66,7 +70,7 @@ def main(argv=None) -> int:
     samples = samples_from_runs(roots)
     table = load_table()
     print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'expected':>9s} {'w':>2s} {'actual s':>9s} "
-          f"{'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'machine':>7s} {'load':>9s}  run")
+          f"{'ms/step':>8s} {'start s':>7s} {'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'machine':>7s} {'load':>9s}  run")
     package = _package()
     ratio_of = {s.source: speed_ratio(s, package) for s in samples}     # each run's speed, read once
     worst = worst_quiet = None
@@ -100,7 +104,7 @@ def main(argv=None) -> int:
         # the steps the table expects this run to take (the plan's units: clock refresh --steps-only)
         expected = expected_steps(budget, s.plan, table_entry(table.get(s.engine, {}), s.scene))
         print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {expected:9d} {s.ranks:2d} {s.engine_s:9.1f} "
-              f"{est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {r3:7.2f} {load:>9s}  {Path(s.source).name}"
+              f"{1e3 * s.loop_s / s.steps:8.3f} {s.engine_s - s.loop_s:7.1f} {est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {r3:7.2f} {load:>9s}  {Path(s.source).name}"
               + ("  shared" if s.shared else "") + ("  off-plan" if off_plan else ""))
     print("largest leave-one-out error: " + (f"{100 * worst:.0f} % (floor: 30 %)" if worst is not None
           else "n/a (no run has another of its engine and scene to be predicted from)"))

@@ -702,9 +702,7 @@ def fit(samples: list[RunSample]) -> Throughput:
     startup, startup_n = _fit_startup(ns, starts, sizes)
     alpha = 1.0
     if sizes >= 2:
-        A = np.column_stack([np.ones_like(ns), ns])
-        from scipy.optimize import nnls       # here: not needed to read the table (validate, #16)
-        (a, b), _ = nnls(A / tps[:, None], np.ones_like(tps))       # relative residuals
+        a, b = _nonnegative_line(ns, tps)
         note = f"{sizes} sizes"
         if sizes >= 3:
             # three sizes or more can tell a straight line from a curve: the cost per step of the
@@ -745,6 +743,15 @@ def fit(samples: list[RunSample]) -> Throughput:
                       startup_per_particle_s=startup_n)
 
 
+def _nonnegative_line(ns, y) -> tuple[float, float]:
+    """(c0, c1) >= 0 of y ≈ c0 + c1 n in relative residuals (scipy.optimize.nnls): every run weighs
+    the same whatever its size."""
+    from scipy.optimize import nnls       # here: not needed to read the table (validate, #16)
+    A = np.column_stack([np.ones_like(ns), ns])
+    (c0, c1), _ = nnls(A / y[:, None], np.ones_like(y))
+    return float(c0), float(c1)
+
+
 def _fit_startup(ns, starts, sizes: int) -> tuple[float, float]:
     """(start-up [s], start-up per particle [s]) from the runs' particle counts ``ns`` and their
     start-up times ``starts``: the median for runs of one size; over two sizes or more a
@@ -754,9 +761,7 @@ def _fit_startup(ns, starts, sizes: int) -> tuple[float, float]:
     median = float(np.median(starts))
     if sizes < 2 or not np.all(starts > 0):
         return median, 0.0
-    from scipy.optimize import nnls       # here: not needed to read the table (validate, #16)
-    A = np.column_stack([np.ones_like(ns), ns])
-    (s0, s1), _ = nnls(A / starts[:, None], np.ones_like(starts))
+    s0, s1 = _nonnegative_line(ns, starts)
     rel_line = np.sum(((s0 + s1 * ns) / starts - 1) ** 2)
     rel_median = np.sum((median / starts - 1) ** 2)
     return (float(s0), float(s1)) if s1 > 0 and rel_line < rel_median else (median, 0.0)
