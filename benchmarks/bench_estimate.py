@@ -68,6 +68,9 @@ def main(argv=None) -> int:
                 print(f"{case.name} {eng}: {out.status} ({'reused' if out.reused else 'ran'})")
         roots.append(root)
     samples = samples_from_runs(roots)
+    if not samples:
+        raise SystemExit(f"no complete run (a directory with summary.json) under {', '.join(map(str, roots))}; "
+                         "give run directories or runs/ trees, or --run CASE")
     table = load_table()
     print(f"{'engine':9s} {'scene':12s} {'n':>6s} {'steps':>9s} {'expected':>9s} {'w':>2s} {'actual s':>9s} "
           f"{'ms/step':>8s} {'start s':>7s} {'table s':>9s} {'ratio':>6s} {'loo s':>9s} {'ratio':>6s} {'machine':>7s} {'load':>9s}  run")
