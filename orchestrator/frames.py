@@ -539,7 +539,7 @@ class _open_h5:
             # It did harm: a process started from another thread (an engine of a threaded sweep)
             # inherits, until its exec, the descriptor of a frames file being written, with its
             # exclusive flock, and opening the renamed file for reading then fails with errno 11
-            # (tests/test_frames.py::test_a_finished_file_opens_while_other_threads_start_processes)
+            # (tests/test_frames.py::test_a_finished_file_opens_while_a_process_holds_its_writers_descriptor)
             self.h = h5py.File(self.path, "r", locking=False)
         except OSError as exc:
             raise FramesError(self._msg(exc)) from None
