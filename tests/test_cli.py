@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+SCHEDULE_MINUTES = 0.15   #: engine-free tests, ~9 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
+
 REPO = Path(__file__).resolve().parents[1]
 VER = REPO / "cases" / "verification"
 

@@ -18,6 +18,8 @@ import pytest
 from orchestrator.case import load_case
 from orchestrator.frames import write_frames
 
+SCHEDULE_MINUTES = 0.16   #: engine-free tests, ~10 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
+
 REPO = Path(__file__).resolve().parents[1]
 CASES = REPO / "cases"
 IMPACT = CASES / "verification" / "chung_ooi_4_oblique.yaml"        # 17 spheres, ~1 s per engine

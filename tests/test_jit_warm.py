@@ -41,6 +41,8 @@ from orchestrator.analysis import d2min, local_strain, neighbor_counts
 from engines.lammps_dump import read_dump
 from orchestrator.jit import dispatchers
 
+SCHEDULE_MINUTES = 0.13   #: engine-free tests, ~8 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
+
 vs = 1e-5
 rng = np.random.default_rng(0)
 c = np.array([[8.0, 8.0, 8.0], [17.5, 8.5, 8.0], [8.5, 17.0, 9.0]]) * vs

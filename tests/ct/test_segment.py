@@ -6,6 +6,8 @@ from scipy.spatial import cKDTree
 from orchestrator.ct import segment
 from orchestrator.ct.io import Scan
 
+SCHEDULE_MINUTES = 0.15   #: engine-free tests, ~9 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
+
 VS = 1e-5            # voxel size [m], as in conftest.py
 
 

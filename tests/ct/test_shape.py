@@ -9,6 +9,8 @@ from scipy.spatial.transform import Rotation as Rot
 
 from orchestrator.ct import segment, shape, synth, track
 
+SCHEDULE_MINUTES = 0.2   #: engine-free tests, ~11 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
+
 VS = 1e-5
 
 
