@@ -19,7 +19,11 @@ Model (per engine and scene, fitted from completed runs)::
   computes, Python callbacks in YADE decks, dumps amortised over the run);
 - ``b`` [s/(particle·step)]: cost per particle and step (contacts, integration); ``α`` = 1, unless
   runs of three sizes or more fit a power law ``b·n^α`` (``a`` = 0) better than the line: the
-  LIGGGHTS shear cell's cost per step grows as n^0.8 from 228 to 14 107 grains;
+  LIGGGHTS shear cell's cost per step grows as n^0.8 from 228 to 14 107 grains; beyond the
+  largest run fitted (``max_particles``) a power law steeper than linear goes on linearly, at the
+  cost per particle of that run: a step of a DEM engine with cell or sort-and-sweep neighbour
+  search does O(n) work, and a superlinear trend over small samples (YADE's shell triaxial:
+  n^1.32 over 300-4 000 grains, its data outgrowing the caches) cannot be carried 8x further;
 - ``S(ranks)`` = 1 + e (ranks − 1): the speed-up on several MPI ranks (LIGGGHTS) or threads (YADE),
   with parallel efficiency ``e`` fitted from runs on more than one rank (0.7 until measured, stated
   as ``assumed``).
@@ -99,6 +103,9 @@ class Throughput:
     #: triaxial decks: 8 s with 300 grains, 35 s with 2 000, 54 s with 4 000); 0 when the runs were
     #: of one size or their start-up did not grow with n
     startup_per_particle_s: float = 0.0
+    #: the largest particle count of the runs fitted (0: not recorded, entries before session 27);
+    #: beyond it a power law with α > 1 continues linearly (:meth:`step_time`)
+    max_particles: int = 0
 
     @classmethod
     def from_dict(cls, entry: dict) -> "Throughput":
@@ -113,8 +120,13 @@ class Throughput:
         return self.startup_s + self.startup_per_particle_s * max(n_particles, 0)
 
     def step_time(self, n_particles: int) -> float:
-        """One rank's time per step [s] with ``n_particles``."""
-        return self.per_step_s + self.per_particle_step_s * max(n_particles, 1) ** self.exponent
+        """One rank's time per step [s] with ``n_particles``: ``a + b n^α``, continued linearly from
+        ``max_particles`` on where α > 1 (the module docstring)."""
+        n = max(n_particles, 1)
+        top = self.max_particles
+        if self.exponent > 1 and 0 < top < n:
+            return self.per_step_s + self.per_particle_step_s * top ** self.exponent * (n / top)
+        return self.per_step_s + self.per_particle_step_s * n ** self.exponent
 
     def engine_time(self, n_particles: int, steps: int, ranks: int = 1) -> float:
         """Predicted engine wall time [s] of ``steps`` steps with ``n_particles`` on ``ranks``."""
@@ -261,6 +273,8 @@ def _against(package: dict, engine: str, scene: str) -> str | None:
         return None
     tp = package[engine][key]
     grows = f" {tp.startup_per_particle_s:.6g}" if tp.startup_per_particle_s else ""    # older records stay valid
+    if tp.exponent > 1 and tp.max_particles:
+        grows += f" linear>{tp.max_particles}"
     return f"{key} {tp.startup_s:.6g} {tp.per_step_s:.6g} {tp.per_particle_step_s:.6g} {tp.exponent:.6g}{grows}"
 
 
@@ -739,8 +753,10 @@ def fit(samples: list[RunSample]) -> Throughput:
         note += f"; {med_units:g} units (median of {len(units)})"
     if startup_n > 0:
         note += f"; start-up {startup:.3g} s + {startup_n:.3g} s per particle"
+    if alpha > 1:
+        note += f"; linear beyond {int(ns.max())} particles"
     return Throughput(startup, float(a), float(b), eff, len(samples), note, med_units, alpha,
-                      startup_per_particle_s=startup_n)
+                      startup_per_particle_s=startup_n, max_particles=int(ns.max()))
 
 
 def _nonnegative_line(ns, y) -> tuple[float, float]:

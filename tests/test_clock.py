@@ -301,6 +301,30 @@ def test_three_sizes_on_a_curve_fit_a_power_law_and_each_size_counts_once():
     assert tl.exponent == 1.0 and tl.per_step_s == pytest.approx(2e-4, rel=1e-6)
 
 
+def test_a_power_law_steeper_than_linear_goes_on_linearly_beyond_the_largest_run():
+    """YADE's shell triaxial costs 0.57, 5.7 and 16.5 ms a step with 300, 2 000 and 4 000 grains
+    (n^1.32, session 26). Carried to the 32 000 member spheres of the clump sample the power law said
+    ~260 ms a step, where that run keeps ~100-115 ms (8.7-10.2 steps per CPU second, attempts.json):
+    beyond the largest run the clock continues at that run's cost per particle (O(n) work per step),
+    and inside the runs' range the power law is untouched."""
+    def run(n):
+        t_step = 2e-8 * n ** 1.32
+        return RunSample("yade", "triaxial:shell_pressure", n, 10_000, 1, 10_000 * t_step, 10_000 * t_step, f"s{n}")
+    tp = fit([run(n) for n in (300, 2000, 4000)])
+    assert tp.exponent == pytest.approx(1.32, rel=1e-6) and tp.max_particles == 4000
+    assert "linear beyond 4000 particles" in tp.note
+    for n in (300, 2000, 4000):
+        assert tp.step_time(n) == pytest.approx(2e-8 * n ** 1.32, rel=1e-6)
+    assert tp.step_time(32_000) == pytest.approx(8 * tp.step_time(4000), rel=1e-9)
+    assert tp.step_time(32_000) < 0.55 * 2e-8 * 32_000 ** 1.32
+    # an entry from before the field (max_particles 0) and a sublinear law are not capped
+    old = Throughput.from_dict({k: v for k, v in asdict(tp).items() if k != "max_particles"})
+    assert old.step_time(32_000) == pytest.approx(2e-8 * 32_000 ** 1.32, rel=1e-6)
+    sub = fit([RunSample("liggghts", "shear_cell", n, 1000, 1, 1000 * 3e-6 * n ** 0.8, 1000 * 3e-6 * n ** 0.8, f"l{n}")
+               for n in (228, 1025, 14107)])
+    assert sub.step_time(10 * 14107) == pytest.approx(3e-6 * (10 * 14107) ** 0.8, rel=1e-6)
+
+
 def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypatch):
     """A quiet run that took 0.44 of the package table's prediction (LIGGGHTS' small shear cell on
     a newer 2-core machine, 27 Nov 2026) scales the next estimates from the package table by its
