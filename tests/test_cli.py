@@ -7,7 +7,9 @@ from pathlib import Path
 
 import pytest
 
-SCHEDULE_MINUTES = 0.15   #: engine-free tests, ~9 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
+from cli_util import main_here
+
+SCHEDULE_MINUTES = 0.1   #: engine-free tests, ~5 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
 
 REPO = Path(__file__).resolve().parents[1]
 VER = REPO / "cases" / "verification"
@@ -25,12 +27,12 @@ def test_help_on_each_command(sub):
 
 
 def test_validate_good_and_bad(tmp_path):
-    ok = cli("validate", VER / "chung_ooi_4_oblique.yaml")
+    ok = main_here("validate", VER / "chung_ooi_4_oblique.yaml")
     assert ok.returncode == 0 and "valid" in ok.stdout and "dt =" in ok.stdout
     bad = tmp_path / "bad.yaml"
     bad.write_text((VER / "chung_ooi_4_oblique.yaml").read_text().replace("radius: 2.5 mm", "radius: 2.5")
                    .replace("extends: _base_impact.yaml", f"extends: {VER / '_base_impact.yaml'}"))
-    out = cli("validate", bad)
+    out = main_here("validate", bad)
     assert out.returncode == 2
     assert str(bad) in out.stderr and "scene.radius" in out.stderr and "has no unit" in out.stderr
     assert "Traceback" not in out.stderr
@@ -79,7 +81,7 @@ def test_engines_lists_versions_and_capabilities(engines_installed):
 def test_dry_run_sizes_without_work(tmp_path):
     """--dry-run prints each engine's particles, steps, memory and engine time, and does no work:
     no packing, no run directory (issue #16; decks are rendered by run_case(dry_run=True))."""
-    out = cli("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path / "runs")
+    out = main_here("run", VER / "chung_ooi_4_oblique.yaml", "--dry-run", "--runs", tmp_path / "runs")
     assert out.returncode == 0, out.stderr
     assert out.stdout.count("17 particles") == 3 and out.stdout.count("engine time") == 3
     assert not (tmp_path / "runs").exists()
@@ -93,15 +95,15 @@ def test_validate_and_dry_run_refuse_what_an_engine_cannot_run(tmp_path):
     case.write_text(f"extends: {REPO / 'cases' / 'triaxial_smoke.yaml'}\nscene:\n  particles:\n    shape: clumps\n"
                     f"    library: {REPO / 'tests' / 'data' / 'clumps_smoke.yaml'}\n"
                     "contact:\n  substitutes:\n    liggghts.membrane: shell_pressure\n")
-    out = cli("validate", case)
+    out = main_here("validate", case)
     assert out.returncode == 2 and "not runnable on liggghts" in out.stdout, out.stdout + out.stderr
     assert "liggghts: cannot run this case" in out.stdout and "inserted_clumps" in out.stdout
     assert "yade: 919 particles" in out.stdout
-    dry = cli("run", case, "--engine", "liggghts", "--dry-run", "--runs", tmp_path / "runs")
+    dry = main_here("run", case, "--engine", "liggghts", "--dry-run", "--runs", tmp_path / "runs")
     assert dry.returncode == 2 and str(case) in dry.stderr and "engine liggghts" in dry.stderr
     assert "contact.substitutes" in dry.stderr and "Traceback" not in dry.stderr
     assert not (tmp_path / "runs").exists()
-    assert cli("run", case, "--engine", "yade", "--dry-run", "--runs", tmp_path / "runs").returncode == 0
+    assert main_here("run", case, "--engine", "yade", "--dry-run", "--runs", tmp_path / "runs").returncode == 0
 
 
 @pytest.mark.engine

@@ -18,6 +18,8 @@ import pytest
 from orchestrator.case import load_case
 from orchestrator.frames import write_frames
 
+from cli_util import main_here
+
 SCHEDULE_MINUTES = 0.16   #: engine-free tests, ~10 s quiet: early in the fast tier (tests/conftest.py schedule_groups)
 
 REPO = Path(__file__).resolve().parents[1]
@@ -25,11 +27,6 @@ CASES = REPO / "cases"
 IMPACT = CASES / "verification" / "chung_ooi_4_oblique.yaml"        # 17 spheres, ~1 s per engine
 SMOKE = CASES / "shear_cell_smoke.yaml"
 NOBODY = 65534
-
-
-class Out:
-    def __init__(self, returncode, stdout, stderr):
-        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
 
 
 def cli(*args, as_nobody=False, timeout=600, env=None):
@@ -40,17 +37,8 @@ def cli(*args, as_nobody=False, timeout=600, env=None):
         pre = ["setpriv", f"--reuid={NOBODY}", f"--regid={NOBODY}", "--clear-groups"] if os.geteuid() == 0 else []
         r = subprocess.run(pre + [sys.executable, "-m", "orchestrator", *args], capture_output=True, text=True,
                            timeout=timeout, cwd="/", env=dict(os.environ, **(env or {})))
-        return Out(r.returncode, r.stdout, r.stderr)
-    import contextlib
-    import io
-    from orchestrator.cli import main
-    o, e = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
-        try:
-            code = main(args)
-        except SystemExit as exc:
-            code = exc.code
-    return Out(code, o.getvalue(), e.getvalue())
+        return r
+    return main_here(*args)
 
 
 def one_message(out, status: int, *words: str):
