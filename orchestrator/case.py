@@ -418,7 +418,8 @@ def yaml_or_case_error(path: Path):
         raise CaseError(path, [f"not valid YAML: {exc}"]) from None
 
 
-def _hint_extra(model_fields: list[str], key: str) -> str:
+def unknown_field_hint(model_fields: list[str], key: str) -> str:
+    """'unknown field; did you mean ...? allowed here: ...' for ``key`` among ``model_fields``."""
     near = difflib.get_close_matches(key, model_fields, n=1)
     alt = f"did you mean '{near[0]}'? " if near else ""
     return f"unknown field; {alt}allowed here: {', '.join(sorted(model_fields))}"
@@ -477,7 +478,7 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
             msg = msg[len("Value error, "):]
         if typ == "extra_forbidden":
             allowed = _allowed_fields(clean, kind)
-            problems.append(f"{path}: {_hint_extra(allowed, str(clean[-1])) if allowed else 'unknown field; remove it'}")
+            problems.append(f"{path}: {unknown_field_hint(allowed, str(clean[-1])) if allowed else 'unknown field; remove it'}")
         elif typ == "missing":
             problems.append(f"{path}: required field is missing; add it")
         elif typ == "union_tag_invalid" or typ == "union_tag_not_found":

@@ -30,7 +30,7 @@ from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
 from .observables import SPREAD_SUFFIXES
-from .sweep import _finished, nested
+from .sweep import _finished, nested, refuse_unknown_fields
 from ..analysis._common import save_figure
 
 KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count", "size_scale")
@@ -110,6 +110,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     the same seed."""
     import pandas as pd
     case0 = load_case(case_path)
+    refuse_unknown_fields(case_path, [knob], also=KNOBS, flag="--knob")
     scene = get_scene(case0.scene.kind)
     engines = engines or case0.engines
     rows = []

@@ -18,9 +18,10 @@ import time
 from pathlib import Path
 
 import yaml
+from pydantic import BaseModel
 
 from ..atomic import write_json, write_text
-from ..case import CaseError, load_case
+from ..case import CaseError, load_case, unknown_field_hint
 from ..clock import run_engine_seconds
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
@@ -59,6 +60,32 @@ def nested(point: dict) -> dict:
             d = d.setdefault(p, {})
         d[parts[-1]] = v
     return out
+
+
+def refuse_unknown_fields(case_path, dotted_fields, also: tuple[str, ...] = (), flag: str = "--set") -> None:
+    """Raise :class:`CaseError` for a dotted field (``--set FIELD=...``, ``--knob FIELD``) the case has
+    no place for, naming it, the closest name and the fields allowed there: a misspelt field would
+    otherwise make every point an invalid row and the command end with status 0. Names in ``also``
+    (the convergence command's knobs) are accepted and offered at the top level. Below a dict, a
+    list or an unset section the point's own validation decides. ``flag``: the command-line option
+    named in the message."""
+    case = load_case(case_path)
+    problems = []
+    for dotted in dotted_fields:
+        if dotted in also:
+            continue
+        obj, where = case, []
+        for part in dotted.split("."):
+            if not isinstance(obj, BaseModel):
+                break
+            names = list(type(obj).model_fields)
+            if part not in names:
+                hint = unknown_field_hint(names + (list(also) if obj is case else []), part)
+                problems.append(f"{flag} {dotted}: {hint}" + (f" (under {'.'.join(where)})" if where else ""))
+                break
+            obj, where = getattr(obj, part), where + [part]
+    if problems:
+        raise CaseError(case_path, problems)
 
 
 def plan(case_path, pts: list[dict], engines: list[str], runs_root) -> list[dict]:
@@ -109,6 +136,7 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
     import pandas as pd
     if isinstance(sets, list):
         sets = parse_sets(sets)
+    refuse_unknown_fields(case_path, list(sets))
     pts = points(sets, grid)
     sid = hashlib.sha256(json.dumps([str(case_path), sets, grid, engines], sort_keys=True, default=str)
                          .encode()).hexdigest()[:10]

@@ -149,6 +149,22 @@ def test_refused_rung_is_a_row(runs_root):
     assert out["table"].loc[0, "status"] == "refused"
 
 
+def test_a_misspelt_knob_or_field_is_one_message_before_any_run(tmp_path):
+    """A knob or --set field the case has no place for is bad input, refused before any rung is
+    planned (it made every rung a 'refused' row and the command end with status 0), with the
+    nearest name; a value the pre-run check refuses stays a row (above)."""
+    from orchestrator.case import CaseError
+    from orchestrator.stability.sweep import sweep
+    with pytest.raises(CaseError, match=r"--knob stifness_scale: unknown field; did you mean 'stiffness_scale'"):
+        ladder(CASE, "stifness_scale", [1, 2], engines=["liggghts"], runs_root=tmp_path)
+    with pytest.raises(CaseError, match=r"--knob scene.normal_stres: unknown field; did you mean 'normal_stress'.*"
+                                        r"\(under scene\)"):
+        ladder(CASE, "scene.normal_stres", [1, 2], engines=["liggghts"], runs_root=tmp_path)
+    with pytest.raises(CaseError, match=r"--set contact.fricton: unknown field; did you mean 'friction'"):
+        sweep(CASE, ["contact.fricton=0.1,0.2"], engines=["liggghts"], runs_root=tmp_path)
+    assert not any(tmp_path.iterdir())                 # nothing planned, nothing written
+
+
 def test_size_and_count_knobs_scale_each_scene_as_it_defines_its_size():
     # issue #15 item 4: the system-size ladders; no engine, only the derived scene
     from orchestrator.case import load_case
