@@ -6,15 +6,53 @@ from __future__ import annotations
 
 import json
 
+from .hints import unknown_name_hint
+
 #: every analysis a case can name (keys of orchestrator.analysis.ANALYSES)
 ANALYSIS_NAMES = ("clusters", "coordination", "d2min", "displacements", "energy", "fabric", "forcechains",
                   "friction", "profiles", "rdf", "shearband", "stress", "triaxial")
 
 
-def parse_specs(specs, known=ANALYSIS_NAMES) -> list[tuple[str, dict]]:
+_TIME_SERIES = ("at", "control", "stride")
+_PAIRS = ("pairs", "interval", "start", "control", "stride")
+
+#: the options each analysis takes: the keyword parameters of ``orchestrator.analysis.ANALYSES[name]``
+#: after ``frames`` (tests/analysis/test_registry_plots.py keeps the two in step), so that a misspelt
+#: option is refused when the case is validated, not met as a TypeError after the run. The clusters
+#: analysis passes the options it does not know to its D²min.
+ANALYSIS_OPTIONS = {
+    "clusters": ("top_fraction", "cutoff", "cutoff_d50", "s_min", "s_min_rg", "d2min_result"),
+    "coordination": (*_TIME_SERIES, "source", "tolerance", "include_walls", "rattler_max", "wall_distance",
+                     "container", "cutoff", "cutoff_d50"),
+    "d2min": ("cutoff", "cutoff_d50", *_PAIRS, "min_neighbors", "wall_distance", "container", "stages"),
+    "displacements": (*_PAIRS, "bins", "log_bins", "stages"),
+    "energy": (*_TIME_SERIES, "youngs_modulus", "poisson_ratio", "limit"),
+    "fabric": (*_TIME_SERIES, "plane", "bins", "source", "tolerance"),
+    "forcechains": (*_TIME_SERIES, "max_angle", "factor", "min_length", "plane"),
+    "friction": ("radius", "torque_wall", "force_wall", "geometry", "steady_from", "steady_control"),
+    "profiles": ("center", "z_ref", "r_max", "z_range", "radial_z_range", "axial_r_range", "bins_r", "bins_z",
+                 *_TIME_SERIES, "samples"),
+    "rdf": ("r_max", "r_max_d50", "bins", "container", "edge_correction", *_TIME_SERIES),
+    "shearband": ("radii", "dr", "n_radii", "center", "z_ref", "z_range", "bins_z", "pairs", "interval", "stride",
+                  "control", "drive", "steady_from", "top_fraction", "stages"),
+    "stress": ("window", "interval", "at", "control", "d2min_cutoff_d50", "d2min_cutoff", "stages"),
+    "triaxial": ("smoothing_rows", "residual_from", "dilatancy_window", "wall"),
+}
+#: analyses that hand the options they do not take themselves to another analysis
+_FORWARDS = {"clusters": "d2min"}
+
+
+def allowed_options(name: str) -> tuple[str, ...]:
+    """The option names analysis ``name`` accepts (its own and those it forwards)."""
+    fwd = _FORWARDS.get(name)
+    return ANALYSIS_OPTIONS.get(name, ()) + (ANALYSIS_OPTIONS[fwd] if fwd else ())
+
+
+def parse_specs(specs, known=ANALYSIS_NAMES, where: str = "analysis") -> list[tuple[str, dict]]:
     """Normalise a case's ``analysis:`` list: each entry a name or ``{name: {options}}``.
 
-    Raises ValueError naming the entry when a name is unknown or options are not a mapping.
+    Raises ValueError naming the entry (``where[n]``, e.g. ``analysis[2]``) when a name is unknown,
+    options are not a mapping, or an option is not one the analysis takes (with the nearest name).
     """
     if specs is None:
         return []
@@ -28,11 +66,16 @@ def parse_specs(specs, known=ANALYSIS_NAMES) -> list[tuple[str, dict]]:
             (name, opts), = s.items()
             opts = {} if opts is None else opts
             if not isinstance(opts, dict):
-                raise ValueError(f"analysis[{n}] ({name}): options must be a mapping, got {type(opts).__name__}")
+                raise ValueError(f"{where}[{n}] ({name}): options must be a mapping, got {type(opts).__name__}")
         else:
-            raise ValueError(f"analysis[{n}]: expected a name or {{name: {{options}}}}, got {s!r}")
+            raise ValueError(f"{where}[{n}]: expected a name or {{name: {{options}}}}, got {s!r}")
         if name not in known:
-            raise ValueError(f"analysis[{n}]: unknown analysis {name!r}; known: {sorted(known)}")
+            raise ValueError(f"{where}[{n}]: unknown analysis {name!r}; known: {sorted(known)}")
+        allowed = allowed_options(name)
+        for key in opts:
+            if key not in allowed:
+                raise ValueError(f"{where}[{n}] ({name}): option {key!r}: "
+                                 f"{unknown_name_hint(allowed, str(key), 'option')}")
         out.append((name, dict(opts)))
     return out
 

@@ -6,7 +6,6 @@ recursively, everything else is replaced.
 """
 from __future__ import annotations
 
-import difflib
 import json
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union, get_args
@@ -18,6 +17,7 @@ from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 from .clumps import library_digest
 from .derive import DerivationError, derive
 from .analysis_specs import parse_specs
+from .hints import unknown_name_hint
 from .registry import engine_names, get_scene, scene_kinds
 from .resources import templates_dir
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
@@ -418,13 +418,6 @@ def yaml_or_case_error(path: Path):
         raise CaseError(path, [f"not valid YAML: {exc}"]) from None
 
 
-def unknown_field_hint(model_fields: list[str], key: str) -> str:
-    """'unknown field; did you mean ...? allowed here: ...' for ``key`` among ``model_fields``."""
-    near = difflib.get_close_matches(key, model_fields, n=1)
-    alt = f"did you mean '{near[0]}'? " if near else ""
-    return f"unknown field; {alt}allowed here: {', '.join(sorted(model_fields))}"
-
-
 def _allowed_fields(loc: tuple, scene_kind: str | None = None) -> list[str]:
     """Field names allowed at the parent of ``loc`` (best effort, for hints); ``scene_kind``
     picks the scene model below ``scene``."""
@@ -478,7 +471,7 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
             msg = msg[len("Value error, "):]
         if typ == "extra_forbidden":
             allowed = _allowed_fields(clean, kind)
-            problems.append(f"{path}: {unknown_field_hint(allowed, str(clean[-1])) if allowed else 'unknown field; remove it'}")
+            problems.append(f"{path}: {unknown_name_hint(allowed, str(clean[-1])) if allowed else 'unknown field; remove it'}")
         elif typ == "missing":
             problems.append(f"{path}: required field is missing; add it")
         elif typ == "union_tag_invalid" or typ == "union_tag_not_found":

@@ -246,9 +246,9 @@ def cmd_analyze(args) -> int:
         return 2
     try:
         specs = [parse_cli_spec(a) for a in args.analysis or []]
-        parse_specs(specs)
+        parse_specs(specs, where="--analysis")
     except ValueError as e:
-        print(f"error: --analysis {e}", file=sys.stderr)
+        print(f"error: {e}" if str(e).startswith("--analysis") else f"error: --analysis {e}", file=sys.stderr)
         return 2
     if not specs:
         case_file = run_dir / "case.yaml"
@@ -256,21 +256,40 @@ def cmd_analyze(args) -> int:
     if not specs:
         print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
-    out = run_analyses(frames_for_analysis(run_dir), specs, Path(args.out) if args.out else run_dir / "analysis")
+    out_dir = Path(args.out) if args.out else run_dir / "analysis"
+    out = run_analyses(frames_for_analysis(run_dir), specs, out_dir)
     summary = read_summary(run_dir) if not args.out else None
     if summary and summary.get("status") == "complete":
         # the run's own analyses were redone: its summary and integrity record follow them
         record_analyses(run_dir, summary, out, specs)
-    print(json.dumps(out, indent=2, default=str))
-    return 0
+    # the tracebacks stay in the file (analysis_summary.json), not on the screen
+    print(json.dumps({k: {f: x for f, x in v.items() if f != "traceback"} for k, v in out.items()},
+                     indent=2, default=str))
+    failed = {k: v for k, v in out.items() if v.get("status") == "error"}
+    for label, v in failed.items():
+        print(f"error: {label} failed: {v.get('error')} (options {json.dumps(v.get('options') or {})}); "
+              f"its traceback is in {out_dir / 'analysis_summary.json'}", file=sys.stderr)
+    return 1 if failed else 0
 
 
 def cmd_vtk(args) -> int:
     from .frames import Frames
     fr = Frames(args.run_dir)
+    n = fr.n_frames
+    which = f"{args.run_dir} has {n} frame(s): give an index from 0 to {n - 1} (negative from the end, -1 the last) or 'all'"
+    if args.frame == "all":
+        frames = range(n)
+    else:
+        try:
+            frames = [int(args.frame)]
+        except ValueError:
+            print(f"error: --frame {args.frame!r} is not a frame index; {which}", file=sys.stderr)
+            return 2
+        if not -n <= frames[0] < n:
+            print(f"error: --frame {frames[0]}: no such frame; {which}", file=sys.stderr)
+            return 2
     out = Path(args.out or Path(args.run_dir) / "vtk")
     out.mkdir(parents=True, exist_ok=True)
-    frames = range(fr.n_frames) if args.frame == "all" else [int(args.frame)]
     for k in frames:
         fr.to_vtk(k, out / f"frame_{range(fr.n_frames)[k]:05d}.vtu")
     print(f"wrote {len(frames)} VTK file(s) to {out}")

@@ -188,6 +188,23 @@ def test_read_only_runs_directory(shared_dir, engines_installed):
     one_message(out, 2, str(runs), "permission denied")
 
 
+def test_bad_frame_index_and_analysis_options_are_one_message(tmp_path):
+    """vtk --frame outside the run or not a number, an option an analysis does not take, and an
+    analysis that fails on an option's value: one message each, no traceback on the screen (the
+    failed analysis' traceback stays in analysis_summary.json), and nothing written for bad input."""
+    run = synthetic_run(tmp_path / "run")
+    for frame, says in (("4", "--frame 4: no such frame"), ("x", "--frame 'x' is not a frame index")):
+        one_message(cli("vtk", run, "--frame", frame, "--out", tmp_path / "vtk"), 2, says, "has 4 frame(s)",
+                    "from 0 to 3")
+    assert not (tmp_path / "vtk").exists()
+    assert cli("vtk", run, "--frame", "-4", "--out", tmp_path / "vtk").returncode == 0
+    one_message(cli("analyze", run, "--analysis", 'displacements:{"bin": 5}', "--out", tmp_path / "a"), 2,
+                "option 'bin'", "did you mean 'bins'")
+    out = cli("analyze", run, "--analysis", 'displacements:{"pairs": "x"}', "--out", tmp_path / "a")
+    one_message(out, 1, "displacements failed", str(tmp_path / "a" / "analysis_summary.json"))
+    assert "traceback" in json.loads((tmp_path / "a" / "analysis_summary.json").read_text())["displacements"]
+
+
 def test_truncated_frames_file_is_named_by_load_and_analyze(tmp_path):
     import orchestrator
     run = synthetic_run(tmp_path / "run")

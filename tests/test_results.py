@@ -103,6 +103,24 @@ def test_analysis_names_known_without_the_analysis_stack_match_the_registry():
     assert sorted(ANALYSIS_NAMES) == sorted(ANALYSES)
 
 
+def test_analysis_options_known_without_the_analysis_stack_match_the_signatures():
+    """The option names ``validate`` checks a case's analyses against (orchestrator.analysis_specs,
+    no analysis import) are the keyword parameters of each analysis function after ``frames``; a
+    misspelt option is one message naming the entry and the nearest name."""
+    import inspect
+    from orchestrator.analysis import ANALYSES
+    from orchestrator.analysis_specs import ANALYSIS_OPTIONS, parse_specs
+    for name, fn in ANALYSES.items():
+        params = list(inspect.signature(fn).parameters.values())[1:]
+        own = [p.name for p in params if p.kind is not inspect.Parameter.VAR_KEYWORD]
+        assert list(ANALYSIS_OPTIONS[name]) == own, name
+    assert parse_specs([{"shearband": {"radii": [1e-4]}}, {"clusters": {"top_fraction": 0.1, "cutoff_d50": 2,
+                                                                         "interval": 0.01}}])
+    with pytest.raises(ValueError, match=r"analysis\[1\] \(shearband\): option 'radiii': unknown option; "
+                                         r"did you mean 'radii'\?"):
+        parse_specs(["friction", {"shearband": {"radiii": 3}}])
+
+
 def test_block_drift_finds_a_trend_and_its_error_covers_a_steady_series():
     """orchestrator.numerics.block_drift (issue #15 item 1: 'μ_macro is steady'): a line through 8
     block means; a steady noisy series drifts within 2 se in ~95 % of draws, a climbing one does not."""

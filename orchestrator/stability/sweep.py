@@ -21,7 +21,8 @@ import yaml
 from pydantic import BaseModel
 
 from ..atomic import write_json, write_text
-from ..case import CaseError, load_case, unknown_field_hint
+from ..case import CaseError, load_case
+from ..hints import unknown_name_hint
 from ..clock import run_engine_seconds
 from ..runner import read_summary, run_dir_for
 from .executor import get_executor, run_task
@@ -80,7 +81,7 @@ def refuse_unknown_fields(case_path, dotted_fields, also: tuple[str, ...] = (), 
                 break
             names = list(type(obj).model_fields)
             if part not in names:
-                hint = unknown_field_hint(names + (list(also) if obj is case else []), part)
+                hint = unknown_name_hint(names + (list(also) if obj is case else []), part)
                 problems.append(f"{flag} {dotted}: {hint}" + (f" (under {'.'.join(where)})" if where else ""))
                 break
             obj, where = getattr(obj, part), where + [part]
