@@ -119,8 +119,13 @@ def describe(size: dict) -> str:
 
 
 def _basis_note(basis: str) -> str:
-    """The estimate's basis after the figure, unless it is the engine's and scene's own runs."""
-    return "" if not basis or basis.startswith("measured") else f" ({basis})"
+    """The estimate's basis after the figure, unless it is the engine's and scene's own runs at sizes
+    near the case's (then only an extrapolation's note, :data:`orchestrator.clock.EXTRAPOLATION_NOTE`)."""
+    if not basis:
+        return ""
+    if basis.startswith("measured"):
+        return f" ({basis.split(', ', 1)[1]})" if "an extrapolation" in basis else ""
+    return f" ({basis})"
 
 
 def problems(case, size: dict) -> list[str]:

@@ -323,6 +323,11 @@ def test_a_power_law_steeper_than_linear_goes_on_linearly_beyond_the_largest_run
     sub = fit([RunSample("liggghts", "shear_cell", n, 1000, 1, 1000 * 3e-6 * n ** 0.8, 1000 * 3e-6 * n ** 0.8, f"l{n}")
                for n in (228, 1025, 14107)])
     assert sub.step_time(10 * 14107) == pytest.approx(3e-6 * (10 * 14107) ** 0.8, rel=1e-6)
+    # an estimate far beyond the runs says so (the fitted curve's form decides it there)
+    table = {"yade": {"triaxial:shell_pressure": tp}}
+    _, near = estimate_engine_time("yade", "triaxial:shell_pressure", 4000, 1000, table=table)
+    _, far = estimate_engine_time("yade", "triaxial:shell_pressure", 32_000, 1000, table=table)
+    assert "extrapolation" not in near and "8.0x the largest run fitted (4,000 particles): an extrapolation" in far
 
 
 def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypatch):
