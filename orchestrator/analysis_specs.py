@@ -17,7 +17,7 @@ _TIME_SERIES = ("at", "control", "stride")
 _PAIRS = ("pairs", "interval", "start", "control", "stride")
 
 #: the options each analysis takes: the keyword parameters of ``orchestrator.analysis.ANALYSES[name]``
-#: after ``frames`` (tests/analysis/test_registry_plots.py keeps the two in step), so that a misspelt
+#: after ``frames`` (tests/test_results.py keeps the two in step), so that a misspelt
 #: option is refused when the case is validated, not met as a TypeError after the run. The clusters
 #: analysis passes the options it does not know to its D²min.
 ANALYSIS_OPTIONS = {

@@ -81,8 +81,8 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
 
 #: an estimate for more than this many times the largest run its entry was fitted on says it is an
-#: extrapolation (the fitted curve's form decides it there: YADE's shear cell, n^0.57 over 589-2 299
-#: grains, puts the 14 107-grain medium case at 5.1 h, a line through the same runs at ~8.5 h)
+#: extrapolation (the fitted curve's form decides it there: YADE's shear cell, n^0.72 over 228-2 299
+#: grains, puts the 14 107-grain medium case at 7.3 h; n^0.57 over its three largest sizes said 5.1 h)
 EXTRAPOLATION_NOTE = 1.5
 
 
