@@ -418,7 +418,7 @@ def yaml_or_case_error(path: Path):
         raise CaseError(path, [f"not valid YAML: {exc}"]) from None
 
 
-def _allowed_fields(loc: tuple, scene_kind: str | None = None) -> list[str]:
+def allowed_fields(loc: tuple, scene_kind: str | None = None) -> list[str]:
     """Field names allowed at the parent of ``loc`` (best effort, for hints); ``scene_kind``
     picks the scene model below ``scene``."""
     model: Any = Case
@@ -470,7 +470,7 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, "):]
         if typ == "extra_forbidden":
-            allowed = _allowed_fields(clean, kind)
+            allowed = allowed_fields(clean, kind)
             problems.append(f"{path}: {unknown_name_hint(allowed, str(clean[-1])) if allowed else 'unknown field; remove it'}")
         elif typ == "missing":
             problems.append(f"{path}: required field is missing; add it")

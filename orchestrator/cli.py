@@ -291,7 +291,7 @@ def cmd_vtk(args) -> int:
     out = Path(args.out or Path(args.run_dir) / "vtk")
     out.mkdir(parents=True, exist_ok=True)
     for k in frames:
-        fr.to_vtk(k, out / f"frame_{range(fr.n_frames)[k]:05d}.vtu")
+        fr.to_vtk(k, out / f"frame_{range(n)[k]:05d}.vtu")
     print(f"wrote {len(frames)} VTK file(s) to {out}")
     return 0
 

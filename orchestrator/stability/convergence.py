@@ -110,7 +110,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     the same seed."""
     import pandas as pd
     case0 = load_case(case_path)
-    refuse_unknown_fields(case_path, [knob], also=KNOBS, flag="--knob")
+    refuse_unknown_fields(case0, case_path, [knob], also=KNOBS, flag="--knob")
     scene = get_scene(case0.scene.kind)
     engines = engines or case0.engines
     rows = []

@@ -18,10 +18,9 @@ import time
 from pathlib import Path
 
 import yaml
-from pydantic import BaseModel
 
 from ..atomic import write_json, write_text
-from ..case import CaseError, load_case
+from ..case import CaseError, allowed_fields, load_case
 from ..hints import unknown_name_hint
 from ..clock import run_engine_seconds
 from ..runner import read_summary, run_dir_for
@@ -63,28 +62,27 @@ def nested(point: dict) -> dict:
     return out
 
 
-def refuse_unknown_fields(case_path, dotted_fields, also: tuple[str, ...] = (), flag: str = "--set") -> None:
-    """Raise :class:`CaseError` for a dotted field (``--set FIELD=...``, ``--knob FIELD``) the case has
-    no place for, naming it, the closest name and the fields allowed there: a misspelt field would
-    otherwise make every point an invalid row and the command end with status 0. Names in ``also``
-    (the convergence command's knobs) are accepted and offered at the top level. Below a dict, a
-    list or an unset section the point's own validation decides. ``flag``: the command-line option
-    named in the message."""
-    case = load_case(case_path)
+def refuse_unknown_fields(case, case_path, dotted_fields, also: tuple[str, ...] = (), flag: str = "--set") -> None:
+    """Raise :class:`CaseError` for a dotted field (``--set FIELD=...``, ``--knob FIELD``) the loaded
+    ``case`` (read from ``case_path``) has no place for, naming it, the closest name and the fields
+    allowed there (:func:`orchestrator.case.allowed_fields`, what the case file's own validation
+    says): a misspelt field would otherwise make every point an invalid row and the command end
+    with status 0. Names in ``also`` (the convergence command's knobs) are accepted and offered at
+    the top level. Below a mapping the point's own validation decides. ``flag``: the command-line
+    option named in the message."""
     problems = []
     for dotted in dotted_fields:
         if dotted in also:
             continue
-        obj, where = case, []
-        for part in dotted.split("."):
-            if not isinstance(obj, BaseModel):
+        parts = tuple(dotted.split("."))
+        for k, part in enumerate(parts):
+            names = allowed_fields(parts[:k + 1], case.scene.kind)
+            if not names:
                 break
-            names = list(type(obj).model_fields)
             if part not in names:
-                hint = unknown_name_hint(names + (list(also) if obj is case else []), part)
-                problems.append(f"{flag} {dotted}: {hint}" + (f" (under {'.'.join(where)})" if where else ""))
+                hint = unknown_name_hint(names + (list(also) if k == 0 else []), part)
+                problems.append(f"{flag} {dotted}: {hint}" + (f" (under {'.'.join(parts[:k])})" if k else ""))
                 break
-            obj, where = getattr(obj, part), where + [part]
     if problems:
         raise CaseError(case_path, problems)
 
@@ -137,11 +135,12 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
     import pandas as pd
     if isinstance(sets, list):
         sets = parse_sets(sets)
-    refuse_unknown_fields(case_path, list(sets))
+    case0 = load_case(case_path)
+    refuse_unknown_fields(case0, case_path, list(sets))
     pts = points(sets, grid)
     sid = hashlib.sha256(json.dumps([str(case_path), sets, grid, engines], sort_keys=True, default=str)
                          .encode()).hexdigest()[:10]
-    name = load_case(case_path).name
+    name = case0.name
     out_dir = Path(runs_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)
     out_json = out_dir / f"sweep-{sid}.json"
