@@ -13,7 +13,8 @@ elastic energy, median over the loading frames, analysis ``energy``) and σ1/σ3
 volume change, by phase (full drag, ramp, drag-free): whether the drag-supported sample comes to
 rest or creeps. ``stage1_solid_fraction``: (step, height [mm], solid fraction, σ1/p) at 12 rows of
 stage 1 from ``triax.txt`` (a drag-held sample reads σ1 ≈ p while it still compacts).
-``attempts_pace``: each attempt's steps per CPU second. ``latest_frame`` (a run still going): the
+``attempts_pace``: each attempt's steps per CPU second; ``pace_against_estimate`` (a run still
+going): the dry run's steps and time against the total its pace projects. ``latest_frame`` (a run still going): the
 void ratios and the solid fraction in 10 rings about the axis of its last frame.
 """
 from __future__ import annotations
@@ -305,6 +306,33 @@ def attempts_pace(run: Path) -> list:
     return rows
 
 
+def pace_against_estimate(run: Path, engine: str) -> dict | None:
+    """A run still going against its dry-run estimate: the steps and engine time the clock expects
+    for the run's case on ``engine`` (``orchestrator.sizing.estimate``, what ``run --dry-run``
+    prints), the CPU time so far, and the total projected from it at the pace of the attempts after
+    the first pooled (their resumes' start-ups included) and at the fastest one's (a sample starts
+    loose, with few contacts: the first attempt is left out), with the estimate over each
+    projection. None without a case or attempts."""
+    rows = attempts_pace(run)
+    if not rows or not (run / "case.yaml").exists():
+        return None
+    from orchestrator.derive import derive
+    from orchestrator.sizing import estimate
+    case = load_case(run / "case.yaml")
+    size = estimate(case, derive(case), engine)
+    total = int(size["steps_expected"] or size["steps"])
+    cpu = sum(r[2] for r in rows)
+    last = max(r[1] for r in rows)
+    later = rows[1:] or rows
+    pooled = sum(r[1] - r[0] for r in later) / sum(r[2] for r in later)   # start-ups of the resumes included
+    paces = [round(pooled, 1), max(r[3] for r in later)]
+    proj = [cpu + max(total - last, 0) / p for p in (paces[1], paces[0])]
+    est = size["engine_time_s"]
+    return {"steps_expected": total, "estimate_h": round(est / 3600, 1), "cpu_h_so_far": round(cpu / 3600, 2),
+            "last_step": last, "pace_steps_per_cpu_s": paces,
+            "projected_h": [round(x / 3600, 1) for x in proj], "estimate_over_projected": [round(est / x, 2) for x in proj]}
+
+
 def report(run: Path) -> dict:
     run = Path(run)
     log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
@@ -321,6 +349,8 @@ def report(run: Path) -> dict:
     out["drag_off"] = off
     out["stage1_solid_fraction"] = stage1_solid_fraction(run)      # (step, H [mm], solid fraction, σ1/p)
     out["attempts_pace"] = attempts_pace(run)          # (first step, last step, CPU s, steps/CPU s, load)
+    if not (run / "frames.h5").exists():               # still going: its pace against its estimate
+        out["pace_against_estimate"] = pace_against_estimate(run, run.name.split("-")[0])
     out["latest_frame"] = latest_frame(run)            # a run still going: void ratios, rings' solid fraction
     steps, sp, _ = _frames(run)
     if off and len(steps):
