@@ -231,9 +231,6 @@ def cmd_verify(args) -> int:
 
 def cmd_analyze(args) -> int:
     import yaml
-    from .grains import frames_for_analysis
-    from .analysis import run_analyses
-    from .runner import read_summary, record_analyses
     run_dir = Path(args.run_dir)
     if not run_dir.exists():
         print(f"error: {run_dir}: no such run directory or frames.h5; give a run directory "
@@ -257,6 +254,11 @@ def cmd_analyze(args) -> int:
         print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
     out_dir = Path(args.out) if args.out else run_dir / "analysis"
+    # an output directory the user may not write is said before the analysis stack is imported (~4 s)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    from .analysis import run_analyses
+    from .grains import frames_for_analysis
+    from .runner import read_summary, record_analyses
     out = run_analyses(frames_for_analysis(run_dir), specs, out_dir)
     summary = read_summary(run_dir) if not args.out else None
     if summary and summary.get("status") == "complete":
