@@ -5,7 +5,7 @@ checkpoint, in a copy of the run directory (the run itself is left untouched).
 
 Prints the steps per CPU second, the interactions (potential and real) and ``yade.timing.stats()``
 (``O.timingEnabled``: the share of every engine, the orchestrator's PyRunners among them).
-docs/validation.md quotes it for the medium clump triaxial (session 24).
+docs/validation.md quotes it for the medium clump triaxial (session 24), docs/engines.md for the shear cell.
 """
 from __future__ import annotations
 
@@ -28,7 +28,9 @@ sys.stdout.flush()
 os._exit(0)
 '''
 #: what a resumed YADE deck reads besides its checkpoint
-FILES = ("checkpoint.yade.gz", "clumps.txt", "particles.txt", "params.json", "resume.py", "triax.txt")
+FILES = ("checkpoint.yade.gz", "clumps.txt", "particles.txt", "params.json", "resume.py", "triax.txt", "walls.yade.*.npy")
+#: where each scene's resumed script has set up its Python side and enters its own loop (the probe runs there instead)
+LOOP_STARTS = ("_pid_of = dict(", "_loop = 0.0")
 
 
 def main(argv=None) -> int:
@@ -42,13 +44,13 @@ def main(argv=None) -> int:
         return 2
     with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
         tmp = Path(tmp)
-        for f in FILES:
-            if (run / f).exists():
-                shutil.copy2(run / f, tmp / f)
+        for pattern in FILES:
+            for f in run.glob(pattern):
+                shutil.copy2(f, tmp / f.name)
         shutil.copytree(run / "yade_runtime", tmp / "yade_runtime")
         (tmp / "dump").mkdir()
         deck = (tmp / "resume.py").read_text()
-        cut = deck.index("_pid_of = dict(")          # after the resume, before the run's own loop
+        cut = min(deck.index(m) for m in LOOP_STARTS if m in deck)   # after the resume, before the run's own loop
         (tmp / "probe.py").write_text(deck[:cut] + PROBE.format(steps=int(a.steps)))
         out = subprocess.run(["yade", "-n", "-j", "1", "-x", "probe.py"], cwd=tmp, capture_output=True, text=True)
         text = out.stdout[out.stdout.find("PROBE"):] if "PROBE" in out.stdout else out.stdout + out.stderr
