@@ -14,9 +14,10 @@ collider's ``avoidSelfInteractionMask`` keeps apart (templates/yade/shear_cell.p
         and the final piston height (the same cell to within the trajectory's divergence: the
         summation order of the forces changes with the pairs, not the forces)
     .venv/bin/python benchmarks/bench_yade_facet_pairs.py --run-dir RUN_DIR [--steps 1000]
-        from a YADE shear-cell run's last checkpoint (a copy; the run is left alone), ``--steps``
-        steps each way, the pairs of the checkpoint cleared in both (the contacts' history restarts
-        alike): steps per CPU second and the census
+        from a YADE shear-cell run's last checkpoint (a copy; the run is left alone; a run of before
+        session 28 will do: the masks are set here), ``--steps`` steps each way, the pairs of the
+        checkpoint cleared in both (the contacts' history restarts alike): steps per CPU second and
+        the census
 
 Run it on a quiet core (``taskset -c 1`` beside a long run on core 0): the figures are CPU times.
 """
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -56,6 +58,12 @@ for _i in O.interactions.all():
 print("PROBE %.3f %s" % ((O.iter - _i0) / (time.process_time() - _t0), json.dumps(_census)), flush=True)
 os._exit(0)
 '''
+
+
+def template_masks() -> tuple[int, int]:
+    """(WALL_FACET_MASK, AVOID_SELF_MASK) as templates/yade/shear_cell.py.j2 sets them."""
+    text = (REPO / "templates" / "yade" / "shear_cell.py.j2").read_text()
+    return tuple(int(re.search(rf"^{name} = (\d+)$", text, re.M).group(1)) for name in ("WALL_FACET_MASK", "AVOID_SELF_MASK"))
 
 
 def variant(script: Path, masked: bool) -> None:
@@ -116,9 +124,12 @@ def from_checkpoint(run_dir: Path, steps: int) -> None:
             (tmp / "dump").mkdir()
             deck = (tmp / "resume.py").read_text()
             cut = min(deck.index(m) for m in LOOP_STARTS if m in deck)
-            # the masks are the checkpoint's: the variant gives the facets the grains' mask again
-            remask = "" if masked else ("for _b in O.bodies:\n    if _b.shape.__class__.__name__ == 'Facet':\n"
-                                        "        _b.groupMask = 1\n")
+            # the masks as the deck of today sets them, or the grains' mask on the facets too (before):
+            # set here whatever the run's own template did, so that any YADE shear-cell run will do
+            wall, avoid = template_masks() if masked else (1, 0)
+            remask = ("for _b in O.bodies:\n    if _b.shape.__class__.__name__ == 'Facet':\n"
+                      f"        _b.groupMask = {wall}\n"
+                      f"for _e in O.engines:\n    if isinstance(_e, Collider):\n        _e.avoidSelfInteractionMask = {avoid}\n")
             (tmp / "probe.py").write_text(deck[:cut] + remask + PROBE.format(steps=steps))
             _, out = yade_cpu(tmp / "probe.py")
             line = next((ln for ln in out.splitlines() if ln.startswith("PROBE ")), None)
