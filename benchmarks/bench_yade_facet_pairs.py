@@ -40,7 +40,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 
 from bench_yade_speed import render                      # noqa: E402  (the orchestrator's own rendering)
-from yade_timing_probe import FILES, LOOP_STARTS         # noqa: E402  (what a resumed deck reads; where its loop starts)
+from yade_timing_probe import probe_script             # noqa: E402  (a resumed deck cut before its own loop)
 
 MASKED = "WALL_FACET_MASK = 3"
 UNMASKED = "WALL_FACET_MASK = 1"
@@ -104,7 +104,7 @@ def whole_runs(case_file: str) -> None:
             census = json.loads((d / "interactions.json").read_text())
             rows.append((label, cpu, census, final_piston_z(d)))
             print(f"{label}: {cpu:.1f} s of CPU; pairs at the end {census}", flush=True)
-    (l0, c0, _, z0), (l1, c1, _, z1) = rows
+    (_, c0, _, z0), (_, c1, _, z1) = rows
     print(f"\n{case_file}, YADE, whole runs, one thread: {c0:.1f} s against {c1:.1f} s of CPU: "
           f"{c1 / c0:.2f}x faster without the facet pairs; final piston displacement {z0 * 1e6:.2f} against "
           f"{z1 * 1e6:.2f} um")
@@ -116,22 +116,14 @@ def from_checkpoint(run_dir: Path, steps: int) -> None:
     rates = []
     for label, masked in (("facet pairs kept apart (the deck)", True), ("facet pairs made (before)", False)):
         with tempfile.TemporaryDirectory(prefix="bench_facets_") as tmp:
-            tmp = Path(tmp)
-            for pattern in FILES:
-                for f in run_dir.glob(pattern):
-                    shutil.copy2(f, tmp / f.name)
-            shutil.copytree(run_dir / "yade_runtime", tmp / "yade_runtime")
-            (tmp / "dump").mkdir()
-            deck = (tmp / "resume.py").read_text()
-            cut = min(deck.index(m) for m in LOOP_STARTS if m in deck)
             # the masks as the deck of today sets them, or the grains' mask on the facets too (before):
             # set here whatever the run's own template did, so that any YADE shear-cell run will do
             wall, avoid = template_masks() if masked else (1, 0)
             remask = ("for _b in O.bodies:\n    if _b.shape.__class__.__name__ == 'Facet':\n"
                       f"        _b.groupMask = {wall}\n"
                       f"for _e in O.engines:\n    if isinstance(_e, Collider):\n        _e.avoidSelfInteractionMask = {avoid}\n")
-            (tmp / "probe.py").write_text(deck[:cut] + remask + PROBE.format(steps=steps))
-            _, out = yade_cpu(tmp / "probe.py")
+            probe = probe_script(run_dir, Path(tmp), remask + PROBE.format(steps=steps))
+            _, out = yade_cpu(probe)
             line = next((ln for ln in out.splitlines() if ln.startswith("PROBE ")), None)
             if line is None:
                 raise SystemExit(f"{run_dir}: the probe printed no PROBE line\n{out[-2000:]}")

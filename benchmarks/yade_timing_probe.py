@@ -43,19 +43,26 @@ def main(argv=None) -> int:
         print(f"error: {run}: no resume.py and checkpoint.yade.gz here (a YADE run that has checkpointed)", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
-        tmp = Path(tmp)
-        for pattern in FILES:
-            for f in run.glob(pattern):
-                shutil.copy2(f, tmp / f.name)
-        shutil.copytree(run / "yade_runtime", tmp / "yade_runtime")
-        (tmp / "dump").mkdir()
-        deck = (tmp / "resume.py").read_text()
-        cut = min(deck.index(m) for m in LOOP_STARTS if m in deck)   # after the resume, before the run's own loop
-        (tmp / "probe.py").write_text(deck[:cut] + PROBE.format(steps=int(a.steps)))
-        out = subprocess.run(["yade", "-n", "-j", "1", "-x", "probe.py"], cwd=tmp, capture_output=True, text=True)
+        probe = probe_script(run, Path(tmp), PROBE.format(steps=int(a.steps)))
+        out = subprocess.run(["yade", "-n", "-j", "1", "-x", probe.name], cwd=tmp, capture_output=True, text=True)
         text = out.stdout[out.stdout.find("PROBE"):] if "PROBE" in out.stdout else out.stdout + out.stderr
         print(text)
         return 0 if "PROBE" in out.stdout else 1
+
+
+def probe_script(run: Path, tmp: Path, tail: str) -> Path:
+    """A copy in ``tmp`` of what ``run``'s resumed YADE deck reads, and ``tmp/probe.py``: the resumed
+    deck up to its own loop (the scene loaded from the checkpoint, its Python side set up), then
+    ``tail``. The run itself is left untouched."""
+    for pattern in FILES:
+        for f in run.glob(pattern):
+            shutil.copy2(f, tmp / f.name)
+    shutil.copytree(run / "yade_runtime", tmp / "yade_runtime")
+    (tmp / "dump").mkdir()
+    deck = (tmp / "resume.py").read_text()
+    cut = min(deck.index(m) for m in LOOP_STARTS if m in deck)   # after the resume, before the run's own loop
+    (tmp / "probe.py").write_text(deck[:cut] + tail)
+    return tmp / "probe.py"
 
 
 if __name__ == "__main__":
