@@ -111,8 +111,8 @@ def whole_runs(case_file: str) -> None:
 
 
 def from_checkpoint(run_dir: Path, steps: int) -> None:
-    if not (run_dir / "checkpoint.yade.gz").exists() or not (run_dir / "resume.py").exists():
-        raise SystemExit(f"error: {run_dir}: no resume.py and checkpoint.yade.gz (a YADE shear-cell run that has checkpointed)")
+    if not (run_dir / "checkpoint.yade.gz").exists():
+        raise SystemExit(f"error: {run_dir}: no checkpoint.yade.gz (a YADE shear-cell run that has checkpointed)")
     rates = []
     for label, masked in (("facet pairs kept apart (the deck)", True), ("facet pairs made (before)", False)):
         with tempfile.TemporaryDirectory(prefix="bench_facets_") as tmp:

@@ -39,8 +39,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=1000)
     a = ap.parse_args(argv)
     run = a.run_dir
-    if not (run / "resume.py").exists() or not (run / "checkpoint.yade.gz").exists():
-        print(f"error: {run}: no resume.py and checkpoint.yade.gz here (a YADE run that has checkpointed)", file=sys.stderr)
+    if not (run / "checkpoint.yade.gz").exists() or not ((run / "resume.py").exists() or (run / "script.py").exists()):
+        print(f"error: {run}: no checkpoint.yade.gz and YADE script here (a YADE run that has checkpointed)", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
         probe = probe_script(run, Path(tmp), PROBE.format(steps=int(a.steps)))
@@ -59,7 +59,9 @@ def probe_script(run: Path, tmp: Path, tail: str) -> Path:
             shutil.copy2(f, tmp / f.name)
     shutil.copytree(run / "yade_runtime", tmp / "yade_runtime")
     (tmp / "dump").mkdir()
-    deck = (tmp / "resume.py").read_text()
+    # a run not resumed yet has only its script, which is the resumed deck but for RESUME
+    deck = (run / "resume.py").read_text() if (run / "resume.py").exists() else \
+        (run / "script.py").read_text().replace("\nRESUME = False\n", "\nRESUME = True\n", 1)
     cut = min(deck.index(m) for m in LOOP_STARTS if m in deck)   # after the resume, before the run's own loop
     (tmp / "probe.py").write_text(deck[:cut] + tail)
     return tmp / "probe.py"
