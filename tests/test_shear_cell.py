@@ -319,8 +319,9 @@ def test_smoke_rotating_parts_turned_by_requested_angle(smoke_runs, engine):
 def test_yade_never_pairs_two_wall_facets(smoke_runs):
     """YADE's collider pairs every two bodies whose boxes overlap, the fixed wall facets too (~34 000
     facet pairs at 4 108 grains: no force, but the collider and the InteractionLoop handled them every
-    step: 2.7x the CPU time of the smoke case, benchmarks/bench_yade_facet_pairs.py). The deck keeps them apart by group mask (templates/yade/shear_cell.py.j2): at the
-    end no facet pair exists, while grains still touch the walls and each other."""
+    step: 2.7x the CPU time of the smoke case, benchmarks/bench_yade_facet_pairs.py). The deck keeps
+    them apart by group mask (templates/yade/shear_cell.py.j2): at the end no facet pair exists, while
+    grains still touch the walls and each other."""
     case, runs = smoke_runs
     if "yade" not in runs:
         pytest.fail("yade not installed; run `bash .ci/setup`")
