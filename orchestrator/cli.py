@@ -247,23 +247,25 @@ def cmd_analyze(args) -> int:
     except ValueError as e:
         print(f"error: {e}" if str(e).startswith("--analysis") else f"error: --analysis {e}", file=sys.stderr)
         return 2
+    # a frames.h5 given for its run: the case, the summary and the outputs are its directory's
+    run_root = run_dir.parent if run_dir.is_file() else run_dir
     if not specs:
-        case_file = run_dir / "case.yaml"
+        case_file = run_root / "case.yaml"
         specs = yaml.safe_load(case_file.read_text()).get("analysis", []) if case_file.exists() else []
     if not specs:
         print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
-    out_dir = Path(args.out) if args.out else run_dir / "analysis"
+    out_dir = Path(args.out) if args.out else run_root / "analysis"
     # an output directory the user may not write is said before the analysis stack is imported (~4 s)
     out_dir.mkdir(parents=True, exist_ok=True)
     from .analysis import run_analyses
     from .grains import frames_for_analysis
     from .runner import read_summary, record_analyses
     out = run_analyses(frames_for_analysis(run_dir), specs, out_dir)
-    summary = read_summary(run_dir) if not args.out else None
+    summary = read_summary(run_root) if not args.out else None
     if summary and summary.get("status") == "complete":
         # the run's own analyses were redone: its summary and integrity record follow them
-        record_analyses(run_dir, summary, out, specs)
+        record_analyses(run_root, summary, out, specs)
     # the tracebacks stay in the file (analysis_summary.json), not on the screen
     print(json.dumps({k: {f: x for f, x in v.items() if f != "traceback"} for k, v in out.items()},
                      indent=2, default=str))

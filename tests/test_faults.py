@@ -188,6 +188,15 @@ def test_read_only_runs_directory(shared_dir, engines_installed):
     one_message(out, 2, str(runs), "permission denied")
 
 
+def test_analyze_takes_a_run_by_its_frames_file(tmp_path):
+    """``orchestrator analyze RUN/frames.h5`` is the run: the case's analyses, outputs in RUN/analysis
+    (it was 'RUN/frames.h5/analysis: a path component is not a directory')."""
+    run = synthetic_run(tmp_path / "run")
+    out = cli("analyze", run / "frames.h5", "--analysis", "displacements")
+    assert out.returncode == 0, out.stderr
+    assert json.loads((run / "analysis" / "analysis_summary.json").read_text())["displacements"]["status"] == "ok"
+
+
 def test_bad_frame_index_and_analysis_options_are_one_message(tmp_path):
     """vtk --frame outside the run or not a number, an option an analysis does not take, and an
     analysis that fails on an option's value: one message each, no traceback on the screen (the
