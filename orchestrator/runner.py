@@ -210,6 +210,18 @@ def _reuse(case: Case, run_dir: Path, old: dict, analyze: bool) -> RunOutcome:
     return RunOutcome(run_dir, "complete", old, reused=True)
 
 
+def merge_analyses(done: dict, done_specs: list, new: dict, new_specs: list) -> tuple[dict, list]:
+    """The analyses of a directory after more were run on it by name (``orchestrator analyze RUN
+    --analysis NAME``): the new results replace every result of the same analysis name; the others
+    stay. ``done``/``new`` are ``{label: {"name", ...}}`` as :func:`orchestrator.analysis.run_analyses`
+    returns them, ``done_specs``/``new_specs`` the ``analysis:`` lists that made them. Returns the
+    results and the spec list that makes them."""
+    names = {v.get("name", label) for label, v in new.items()}
+    kept = {label: v for label, v in done.items() if v.get("name", label) not in names}
+    specs = [s for s in done_specs if (s if isinstance(s, str) else next(iter(s))) not in names] + list(new_specs)
+    return {**kept, **new}, specs
+
+
 def record_analyses(run_dir: Path, summary: dict, analysis: dict, specs, seconds: float | None = None) -> dict:
     """Put analyses just (re)done in ``run_dir/analysis`` into the complete run's ``summary`` and
     its integrity record (so that the next ``orchestrator run`` of the case reuses them rather than

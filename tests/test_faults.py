@@ -197,6 +197,28 @@ def test_analyze_takes_a_run_by_its_frames_file(tmp_path):
     assert json.loads((run / "analysis" / "analysis_summary.json").read_text())["displacements"]["status"] == "ok"
 
 
+def test_an_analysis_run_by_name_keeps_the_others_on_record(tmp_path):
+    """Nothing computed is lost: ``analyze RUN --analysis rdf`` after the run's own analyses adds rdf
+    to analysis_summary.json (and to a complete run's summary) instead of leaving rdf alone there;
+    run again, an analysis replaces its own earlier result."""
+    from orchestrator.runner import merge_analyses
+    run = synthetic_run(tmp_path / "run")
+    summary_file = run / "analysis" / "analysis_summary.json"
+    assert cli("analyze", run, "--analysis", "displacements").returncode == 0
+    first = json.loads(summary_file.read_text())["displacements"]
+    assert cli("analyze", run, "--analysis", "rdf").returncode == 0
+    both = json.loads(summary_file.read_text())
+    assert set(both) == {"displacements", "rdf"} and both["displacements"] == first
+    assert cli("analyze", run, "--analysis", 'rdf:{"bins": 20}').returncode == 0
+    again = json.loads(summary_file.read_text())
+    assert set(again) == {"displacements", "rdf"} and again["rdf"]["options"] == {"bins": 20}
+    # the spec list follows the results: one entry per analysis name, the newest options
+    done = {"friction": {"name": "friction"}, "d2min": {"name": "d2min"}, "d2min_2": {"name": "d2min"}}
+    res, specs = merge_analyses(done, ["friction", {"d2min": {"cutoff": 1}}, "d2min"], {"d2min": {"name": "d2min"}},
+                                [{"d2min": {"cutoff": 2}}])
+    assert set(res) == {"friction", "d2min"} and specs == ["friction", {"d2min": {"cutoff": 2}}]
+
+
 def test_bad_frame_index_and_analysis_options_are_one_message(tmp_path):
     """vtk --frame outside the run or not a number, an option an analysis does not take, and an
     analysis that fails on an option's value: one message each, no traceback on the screen (the
