@@ -81,8 +81,8 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
 
 #: an estimate for more than this many times the largest run its entry was fitted on says it is an
-#: extrapolation (the fitted curve's form decides it there: YADE's shear cell, n^0.72 over 228-2 299
-#: grains, puts the 14 107-grain medium case at 7.3 h; n^0.57 over its three largest sizes said 5.1 h)
+#: extrapolation: there the fitted curve's form decides the figure (docs/validation.md, the clock: YADE's
+#: shear-cell entry put its medium case at 7.3 h or 5.1 h by the runs chosen, 9.9 h once refitted)
 EXTRAPOLATION_NOTE = 1.5
 
 

@@ -124,7 +124,8 @@ def _basis_note(basis: str) -> str:
     if not basis:
         return ""
     if basis.startswith("measured"):
-        return f" ({basis.split(', ', 1)[1]})" if "an extrapolation" in basis else ""
+        far = [clause for clause in basis.split(", ") if clause.endswith("an extrapolation")]
+        return f" ({far[0]})" if far else ""
     return f" ({basis})"
 
 
