@@ -258,23 +258,9 @@ def cmd_analyze(args) -> int:
     out_dir = Path(args.out) if args.out else run_root / "analysis"
     # an output directory the user may not write is said before the analysis stack is imported (~4 s)
     out_dir.mkdir(parents=True, exist_ok=True)
-    from .analysis import atomic_write_json, run_analyses
-    from .grains import frames_for_analysis
-    from .runner import merge_analyses, read_summary, record_analyses
-    before = out_dir / "analysis_summary.json"
-    before = json.loads(before.read_text()) if args.analysis and before.exists() else {}
-    out = run_analyses(frames_for_analysis(run_dir), specs, out_dir)
-    summary = read_summary(run_root) if not args.out else None
-    if args.analysis:
-        # analyses asked for by name join what the directory held: the case's others stay on record
-        done_specs = (summary or {}).get("analysis_specs") or []
-        merged, merged_specs = merge_analyses(before, done_specs, out, specs)
-        atomic_write_json(merged, out_dir / "analysis_summary.json")
-    else:
-        merged, merged_specs = out, specs
-    if summary and summary.get("status") == "complete":
-        # the run's own analyses were (re)done: its summary and integrity record follow them
-        record_analyses(run_root, summary, merged, merged_specs)
+    from .runner import analyze_run
+    out, _ = analyze_run(run_root, specs, out_dir if args.out else None, by_name=bool(args.analysis),
+                         frames=run_dir)
     # the tracebacks stay in the file (analysis_summary.json), not on the screen
     print(json.dumps({k: {f: x for f, x in v.items() if f != "traceback"} for k, v in out.items()},
                      indent=2, default=str))

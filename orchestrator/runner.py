@@ -222,6 +222,42 @@ def merge_analyses(done: dict, done_specs: list, new: dict, new_specs: list) -> 
     return {**kept, **new}, specs
 
 
+def analyze_run(run_dir, specs, out_dir=None, by_name: bool = False, frames=None) -> tuple[dict, dict]:
+    """Run analyses on a run directory's frames and keep the directory's record whole.
+
+    The one path by which ``orchestrator analyze`` and ``orchestrator report --analysis`` (re)do
+    analyses: ``specs`` run into ``out_dir`` (default ``run_dir/analysis``). With ``by_name``, the
+    analyses asked for join what the directory held (:func:`merge_analyses`: the case's others stay
+    on record); otherwise they are the record. When the output is the run's own and the run is
+    complete, its ``summary.json`` and integrity record follow (:func:`record_analyses`), so that the
+    next ``orchestrator run`` reuses them rather than reading the changed files as damage.
+
+    ``frames``: where the frames are read (default ``run_dir``; a frames file given for its run).
+
+    Returns ``(new, record)``: the results just computed and the whole record now in
+    ``out_dir/analysis_summary.json`` (both ``{label: {...}}``, as
+    :func:`orchestrator.analysis.run_analyses` returns them).
+    """
+    from .analysis import atomic_write_json, run_analyses   # on demand: the analysis stack is heavy
+    from .grains import frames_for_analysis
+    run_dir = Path(run_dir)
+    out_dir = Path(out_dir) if out_dir is not None else run_dir / "analysis"
+    own = out_dir.resolve() == (run_dir / "analysis").resolve()
+    record_path = out_dir / "analysis_summary.json"
+    before = json.loads(record_path.read_text()) if by_name and record_path.exists() else {}
+    new = run_analyses(frames_for_analysis(frames if frames is not None else run_dir), specs, out_dir)
+    summary = read_summary(run_dir) if own else None
+    if by_name:
+        done_specs = (summary or {}).get("analysis_specs") or []
+        record, record_specs = merge_analyses(before, done_specs, new, specs)
+        atomic_write_json(record, record_path)
+    else:
+        record, record_specs = new, specs
+    if summary and summary.get("status") == "complete":
+        record_analyses(run_dir, summary, record, record_specs)
+    return new, record
+
+
 def record_analyses(run_dir: Path, summary: dict, analysis: dict, specs, seconds: float | None = None) -> dict:
     """Put analyses just (re)done in ``run_dir/analysis`` into the complete run's ``summary`` and
     its integrity record (so that the next ``orchestrator run`` of the case reuses them rather than

@@ -200,7 +200,7 @@ def test_analyze_takes_a_run_by_its_frames_file(tmp_path):
 def test_an_analysis_run_by_name_keeps_the_others_on_record(tmp_path):
     """Nothing computed is lost: ``analyze RUN --analysis rdf`` after the run's own analyses adds rdf
     to analysis_summary.json (and to a complete run's summary) instead of leaving rdf alone there;
-    run again, an analysis replaces its own earlier result."""
+    run again, an analysis replaces its own earlier result; ``report RUN --analysis NAME`` too."""
     from orchestrator.runner import merge_analyses
     run = synthetic_run(tmp_path / "run")
     summary_file = run / "analysis" / "analysis_summary.json"
@@ -212,6 +212,11 @@ def test_an_analysis_run_by_name_keeps_the_others_on_record(tmp_path):
     assert cli("analyze", run, "--analysis", 'rdf:{"bins": 20}').returncode == 0
     again = json.loads(summary_file.read_text())
     assert set(again) == {"displacements", "rdf"} and again["rdf"]["options"] == {"bins": 20}
+    # the report's --analysis takes the same path: it shows and adds, it does not drop the others
+    assert cli("report", run, "--analysis", "displacements").returncode == 0
+    shown = json.loads(summary_file.read_text())
+    assert set(shown) == {"displacements", "rdf"} and shown["rdf"] == again["rdf"]
+    assert "<h3>rdf</h3>" in (run / "report.html").read_text()
     # the spec list follows the results: one entry per analysis name, the newest options
     done = {"friction": {"name": "friction"}, "d2min": {"name": "d2min"}, "d2min_2": {"name": "d2min"}}
     res, specs = merge_analyses(done, ["friction", {"d2min": {"cutoff": 1}}, "d2min"], {"d2min": {"name": "d2min"}},

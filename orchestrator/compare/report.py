@@ -19,8 +19,7 @@ import pandas as pd
 from ..results import key_results
 from ..analysis.plots import _fig
 from ..frames import Frames
-from ..grains import frames_for_analysis
-from ..analysis import run_analyses
+from ..runner import analyze_run
 
 __all__ = ["fig_to_data_uri", "write_run_report", "write_compare_report", "run_checks", "DEFAULT_ANALYSES"]
 
@@ -274,7 +273,8 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
     specs = analyses if analyses is not None else ((case or {}).get("analysis") or DEFAULT_ANALYSES.get(kind, []))
     asum = json.loads(asum_path.read_text()) if asum_path.exists() else None
     if specs and (rerun or analyses is not None or asum is None):
-        asum = run_analyses(frames_for_analysis(run_dir), specs, adir)
+        # analyses named for the report join the run's record; the case's own list replaces it
+        _, asum = analyze_run(run_dir, specs, by_name=analyses is not None)
     title = f"Run report — {summary.get('case', case.get('name', run_dir.parent.name) if case else run_dir.name)} " \
             f"on {summary.get('engine', fr.meta.get('engine', '?'))}"
     body = []
