@@ -146,7 +146,11 @@ def cmd_clock(args) -> int:
                   "its summary.json says complete; a resumed run with the record of all its attempts); nothing written", file=sys.stderr)
             return 2
         out = package_table_path() if args.package else user_table_path()
-        fitted = refresh(args.runs, out, steps_only=args.steps_only)
+        try:
+            fitted = refresh(args.runs, out, steps_only=args.steps_only, add=args.add)
+        except ValueError as exc:
+            print(f"error: {exc}; nothing written", file=sys.stderr)
+            return 2
         if args.steps_only:
             con.print(f"refreshed the step plans of {sum(len(v) for v in fitted.values())} engine/scene model(s) "
                       f"({', '.join(f'{e} {k}: {tp.units:g} units' for e, v in fitted.items() for k, tp in v.items())}); "
@@ -338,6 +342,9 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     ck.add_argument("--steps-only", action="store_true",
                     help="refresh only how many steps the runs took (the same on every machine), keeping the "
                          "table's costs per step (fitted on its own machine)")
+    ck.add_argument("--add", action="store_true",
+                    help="fit the runs given together with the runs each entry was fitted on before (kept in the "
+                         "table), rather than in their place")
     ck.set_defaults(func=cmd_clock)
 
     vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")

@@ -156,6 +156,24 @@ class RunSample:
     #: machine's cores (orchestrator.attempts); None for runs made before the record had them
     load: float | None = field(default=None, compare=False)
     cores: int | None = field(default=None, compare=False)
+    #: the units the run took as a table entry stored them (:meth:`to_row`); the plan is not stored
+    stored_units: float | None = field(default=None, compare=False)
+
+    def to_row(self) -> dict:
+        """What a table entry keeps of the run it was fitted on (``samples``), so that a later
+        ``clock refresh --add`` fits the new runs together with it after its directory is gone:
+        the run's name (its hash), size, steps, ranks, engine and loop time [s], the machine's load
+        and cores while it ran, and the units of its step plan."""
+        return {"run": Path(self.source).name, "n": self.n_particles, "steps": self.steps, "ranks": self.ranks,
+                "engine_s": round(self.engine_s, 3), "loop_s": round(self.loop_s, 3), "load": self.load,
+                "cores": self.cores, "units": self.units}
+
+    @classmethod
+    def from_row(cls, engine: str, scene: str, row: dict) -> "RunSample":
+        """A run as a table entry stored it (:meth:`to_row`)."""
+        return cls(engine, scene, int(row["n"]), int(row["steps"]), int(row.get("ranks") or 1), float(row["engine_s"]),
+                   float(row["loop_s"]), str(row.get("run", "")), None, row.get("load"), row.get("cores"),
+                   row.get("units"))
 
     @property
     def shared(self) -> bool:
@@ -177,7 +195,7 @@ class RunSample:
         """Units (StepPlan) this run took [-]; None without a plan, or when the run did not follow it
         (e.g. a triaxial whose stage 1 ran out of chunks and skipped the drag ramp)."""
         if self.plan is None:
-            return None
+            return self.stored_units
         k = self.plan.chunks_of(self.steps)
         return self.plan.units_of(self.steps) if 0.5 <= k <= self.plan.max_units + 0.5 else None
 
@@ -791,9 +809,15 @@ def _fit_startup(ns, starts, sizes: int) -> tuple[float, float]:
     return (float(s0), float(s1)) if s1 > 0 and rel_line < rel_median else (median, 0.0)
 
 
-def refresh(paths, out: Path | None = None, steps_only: bool = False) -> dict:
+def refresh(paths, out: Path | None = None, steps_only: bool = False, add: bool = False) -> dict:
     """Refit the table from the complete runs under ``paths`` and write it (default: the user
     table, :func:`user_table_path`). Returns ``{engine: {scene: Throughput}}`` of what was fitted.
+
+    Each entry refitted keeps the runs it was fitted on (``samples``, :meth:`RunSample.to_row`).
+    ``add``: fit the new runs together with those an entry kept (a run met again counts once), so
+    that runs made on machines that are gone still count; refused for an entry fitted on another
+    machine than this one (:func:`machine_id`: two machines' speeds in one fit). Without it the
+    runs given replace an entry's (a change to a deck makes its earlier runs stale).
 
     ``steps_only``: refresh only how many steps the runs took (the step plan's ``units``, the same
     on every machine: e.g. a new stage-1 servo law that converges in fewer chunks) of the entries
@@ -805,9 +829,13 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False) -> dict:
     out = Path(out) if out else user_table_path()
     old = json.loads(out.read_text()) if out.is_file() else {}
     fitted: dict = {}
+    kept: dict = {}
     for (eng, sc), smp in sorted(groups.items()):
         if not steps_only:
+            if add:
+                smp = _with_kept_samples(smp, (old.get(eng) or {}).get(sc), f"{eng} {sc}")
             fitted.setdefault(eng, {})[sc] = replace(fit(smp), machine=machine_id())
+            kept.setdefault(eng, {})[sc] = [x.to_row() for x in smp]
             continue
         units = [x.units for x in smp if x.units is not None]
         entry = (old.get(eng) or {}).get(sc)
@@ -819,7 +847,24 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False) -> dict:
                          + f"; {med:g} units (median of {len(units)}, steps refreshed alone)")
         fitted.setdefault(eng, {})[sc] = Throughput.from_dict(entry)
     for eng, scenes in fitted.items():
-        old.setdefault(eng, {}).update({sc: asdict(tp) for sc, tp in scenes.items()})
+        old.setdefault(eng, {}).update({sc: asdict(tp) | ({"samples": kept[eng][sc]} if sc in kept.get(eng, {}) else
+                                                          {"samples": (old.get(eng) or {}).get(sc, {}).get("samples", [])})
+                                        for sc, tp in scenes.items()})
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text(out, json.dumps(old, indent=1, sort_keys=True) + "\n")     # atomic, keeps the umask
     return fitted
+
+
+def _with_kept_samples(new: list, entry: dict | None, what: str) -> list:
+    """``new`` runs and the runs a table ``entry`` kept (``samples``), each run once (by its name
+    and engine time, as :func:`samples_from_runs` counts them)."""
+    if not entry:
+        return new
+    here = machine_id()
+    if entry.get("machine") and entry["machine"] != here:
+        raise ValueError(f"clock refresh --add: the {what} entry was fitted on {entry['machine']}, this machine is "
+                         f"{here}: refit it from this machine's runs alone (without --add)")
+    seen = {(Path(x.source).name, round(x.engine_s, 3)) for x in new}
+    eng, sc = new[0].engine, new[0].scene
+    older = [RunSample.from_row(eng, sc, r) for r in entry.get("samples") or []]
+    return [x for x in older if (x.source, round(x.engine_s, 3)) not in seen] + list(new)

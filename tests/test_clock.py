@@ -89,6 +89,46 @@ def test_refresh_from_run_directories(tmp_path, monkeypatch):
     assert load_table()["liggghts"]["plane_shear"] == tp
 
 
+def _plane_shear_run(root, name, n, steps, eng_s, loop_s):
+    d = root / name
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text(json.dumps({
+        "engine": "liggghts", "status": "complete", "steps": steps, "steps_run": steps,
+        "wall_time": {"engine": eng_s, "engine_loop": loop_s}}))
+    (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
+    (d / "case.yaml").write_text("scene: {kind: plane_shear}\n")
+    return d
+
+
+def test_refresh_add_fits_new_runs_with_those_the_entry_kept(tmp_path, monkeypatch):
+    """Run directories do not outlive their machine: an entry keeps the runs it was fitted on, and
+    ``refresh --add`` fits new runs together with them (a run met again counts once); without
+    ``--add`` the runs given replace them; an entry fitted on another machine is not mixed in."""
+    import shutil
+    out = tmp_path / "tp.json"
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(out))
+    first = [_plane_shear_run(tmp_path / "a", "liggghts-0", 300, 20000, 7.0, 6.0),
+             _plane_shear_run(tmp_path / "a", "liggghts-1", 1000, 20000, 21.0, 20.0)]
+    refresh([tmp_path / "a"])
+    rows = json.loads(out.read_text())["liggghts"]["plane_shear"]["samples"]
+    assert [r["n"] for r in rows] == [300, 1000] and rows[0]["run"] == "liggghts-0"
+    for d in first:
+        shutil.rmtree(d)                                   # the machine is gone, its runs with it
+    # a 3 000-grain run of the same model (a = 0, b = 1e-6): with the kept runs, one line through three sizes
+    _plane_shear_run(tmp_path / "b", "liggghts-2", 3000, 20000, 61.0, 60.0)
+    tp = refresh([tmp_path / "b"], add=True)["liggghts"]["plane_shear"]
+    assert tp.runs == 3 and tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-6)
+    again = refresh([tmp_path / "b"], add=True)["liggghts"]["plane_shear"]
+    assert again.runs == 3                                 # the 3 000-grain run is not counted twice
+    alone = refresh([tmp_path / "b"])["liggghts"]["plane_shear"]
+    assert alone.runs == 1 and "one size" in alone.note
+    table = json.loads(out.read_text())
+    table["liggghts"]["plane_shear"]["machine"] = "another machine x64"
+    out.write_text(json.dumps(table))
+    with pytest.raises(ValueError, match="fitted on another machine x64"):
+        refresh([tmp_path / "b"], add=True)
+
+
 def test_a_clump_run_is_counted_by_its_member_spheres(tmp_path):
     """The estimate sizes a clump sample by the spheres the engine integrates (the members,
     ``n_spheres``; sizing.integrated_particles); a run's sample must count the same, not the grains
