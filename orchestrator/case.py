@@ -17,7 +17,7 @@ from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 from .clumps import library_digest
 from .derive import DerivationError, derive
 from .analysis_specs import parse_specs
-from .hints import unknown_name_hint
+from .hints import did_you_mean, unknown_name_hint
 from .registry import engine_names, get_scene, scene_kinds
 from .resources import templates_dir
 from .units import Acceleration, Density, Force, Length, Pressure, SurfaceEnergy, Time
@@ -475,7 +475,13 @@ def format_validation_error(exc: ValidationError, prefix: tuple = ()) -> list[st
         elif typ == "missing":
             problems.append(f"{path}: required field is missing; add it")
         elif typ == "union_tag_invalid" or typ == "union_tag_not_found":
-            problems.append(f"{path}: {msg}; scene.kind must be one of {', '.join(scene_kinds())}")
+            tag = (e.get("ctx") or {}).get("tag")
+            kinds = ", ".join(scene_kinds())
+            if tag is None:
+                problems.append(f"scene.kind: required field is missing; set it to one of {kinds}")
+            else:
+                problems.append(f"scene.kind: {tag!r} is not a scene; {did_you_mean(scene_kinds(), str(tag))}"
+                                f"set it to one of {kinds}")
         else:
             got = e.get("input")
             got_s = f" (got {got!r})" if got is not None and not isinstance(got, dict) else ""

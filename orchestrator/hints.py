@@ -6,9 +6,13 @@ from __future__ import annotations
 import difflib
 
 
+def did_you_mean(allowed, key: str) -> str:
+    """``did you mean 'x'? `` for the name in ``allowed`` closest to ``key``; "" when none is close."""
+    near = difflib.get_close_matches(key, list(allowed), n=1)
+    return f"did you mean '{near[0]}'? " if near else ""
+
+
 def unknown_name_hint(allowed, key: str, what: str = "field") -> str:
     """``unknown field; did you mean 'x'? allowed here: a, b, x`` for ``key`` among ``allowed``."""
     allowed = list(allowed)
-    near = difflib.get_close_matches(key, allowed, n=1)
-    alt = f"did you mean '{near[0]}'? " if near else ""
-    return f"unknown {what}; {alt}allowed here: {', '.join(sorted(allowed))}"
+    return f"unknown {what}; {did_you_mean(allowed, key)}allowed here: {', '.join(sorted(allowed))}"

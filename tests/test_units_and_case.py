@@ -60,7 +60,8 @@ BAD = [
     ("youngs_modulus: 63 GPa", "youngs_modulus: 63 GPa, poison_ratio: 0.2", "material.poison_ratio", "did you mean 'poisson_ratio'"),
     ("density: 2500 kg/m^3, ", "", "material.density", "required field is missing"),
     ("friction: 0.58", "friction: lots", "contact.friction", "valid number"),
-    ("kind: impact", "kind: pendulum", "scene", "scene.kind must be one of"),
+    ("kind: impact", "kind: pendulum", "scene.kind", "'pendulum' is not a scene; set it to one of"),
+    ("kind: impact", "kind: impakt", "scene.kind", "did you mean 'impact'? set it to one of impact, plane_shear"),
     ("friction: 0.58}", "friction: 0.58}\nanalysis: [d2minn]", "analysis", "unknown analysis 'd2minn'"),
 ]
 
