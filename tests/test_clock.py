@@ -69,26 +69,6 @@ def test_unknown_scene_falls_back_to_the_slowest_known_one():
     assert np.isnan(t) and "no throughput" in basis
 
 
-def test_refresh_from_run_directories(tmp_path, monkeypatch):
-    runs = tmp_path / "runs"
-    for k, (n, steps, eng_s, loop_s) in enumerate([(300, 20000, 7.0, 6.0), (1000, 20000, 21.0, 20.0)]):
-        d = runs / "c" / f"liggghts-{k}"
-        d.mkdir(parents=True)
-        (d / "summary.json").write_text(json.dumps({
-            "engine": "liggghts", "status": "complete", "steps": steps, "steps_run": steps,
-            "wall_time": {"engine": eng_s, "engine_loop": loop_s}}))
-        (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
-        (d / "case.yaml").write_text("scene: {kind: plane_shear}\n")
-    out = tmp_path / "tp.json"
-    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(out))
-    fitted = refresh([runs])
-    tp = fitted["liggghts"]["plane_shear"]
-    # loop/step = 3e-4 and 1e-3 s at n = 300 and 1000: a = 0, b = 1e-6
-    assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-6) and tp.per_step_s == pytest.approx(0, abs=1e-12)
-    assert tp.startup_s == pytest.approx(1.0)
-    assert load_table()["liggghts"]["plane_shear"] == tp
-
-
 def _plane_shear_run(root, name, n, steps, eng_s, loop_s):
     d = root / name
     d.mkdir(parents=True)
@@ -98,6 +78,20 @@ def _plane_shear_run(root, name, n, steps, eng_s, loop_s):
     (d / "params.json").write_text(json.dumps({"scene": {"n": n}}))
     (d / "case.yaml").write_text("scene: {kind: plane_shear}\n")
     return d
+
+
+def test_refresh_from_run_directories(tmp_path, monkeypatch):
+    runs = tmp_path / "runs"
+    for k, (n, steps, eng_s, loop_s) in enumerate([(300, 20000, 7.0, 6.0), (1000, 20000, 21.0, 20.0)]):
+        _plane_shear_run(runs / "c", f"liggghts-{k}", n, steps, eng_s, loop_s)
+    out = tmp_path / "tp.json"
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(out))
+    fitted = refresh([runs])
+    tp = fitted["liggghts"]["plane_shear"]
+    # loop/step = 3e-4 and 1e-3 s at n = 300 and 1000: a = 0, b = 1e-6
+    assert tp.per_particle_step_s == pytest.approx(1e-6, rel=1e-6) and tp.per_step_s == pytest.approx(0, abs=1e-12)
+    assert tp.startup_s == pytest.approx(1.0)
+    assert load_table()["liggghts"]["plane_shear"] == tp
 
 
 def test_refresh_add_fits_new_runs_with_those_the_entry_kept(tmp_path, monkeypatch):
