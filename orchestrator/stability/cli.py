@@ -65,13 +65,22 @@ def cmd_stability(args) -> int:
     return 0
 
 
+def _say_run_ended(con):
+    """``on_result`` of a ladder or sweep: one line as each run ends (a ladder of hours says how far it is)."""
+    def say(task, res):
+        con.print(f"  {task['engine']} {task['point']} -> {res.get('status')}"
+                  f"{' (reused)' if res.get('reused') else ''} {res.get('error') or ''}")
+    return say
+
+
 def cmd_convergence(args) -> int:
     from .convergence import ladder
     out = ladder(args.case, args.knob, [_val(v) for v in args.values],
                  engines=None if args.engine == "all" else [args.engine], runs_root=args.runs,
                  reference=args.reference, target_error=args.target_error, scheduler=args.scheduler,
                  workers=args.workers, plot=args.plot or Path(args.runs) / "convergence" /
-                 f"{Path(args.case).stem}-{args.knob}.png", full=args.full, seeds=args.seeds)
+                 f"{Path(args.case).stem}-{args.knob}.png", full=args.full, seeds=args.seeds,
+                 on_result=_say_run_ended(console()))
     df = out["table"]
     cols = ["engine", args.knob] + (["seed"] if args.seeds else []) + ["status", "sample", "engine_time_s", "error"] \
         + [c for c in df.columns if c.startswith("err_")]
@@ -115,13 +124,9 @@ def _val(v: str):
 
 def cmd_sweep(args) -> int:
     from .sweep import sweep
-    con = console()
-
-    def show(task, res):
-        con.print(f"  {task['engine']} {task['point']} -> {res.get('status')}"
-                  f"{' (reused)' if res.get('reused') else ''} {res.get('error') or ''}")
     df = sweep(args.case, args.set, grid=args.grid, engines=None if args.engine == "all" else [args.engine],
-               runs_root=args.runs, scheduler=args.scheduler, workers=args.workers, on_result=show, force=args.force)
+               runs_root=args.runs, scheduler=args.scheduler, workers=args.workers, on_result=_say_run_ended(console()),
+               force=args.force)
     _print_df(df.drop(columns=["run_id"]), f"sweep of {args.case}")
     failed = df[df["status"] == "failed"]
     return 1 if len(failed) else 0

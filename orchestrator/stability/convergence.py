@@ -101,13 +101,15 @@ def pareto(times, errors) -> list[int]:
 def ladder(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
            reference=None, target_error: float = 0.05, scheduler=None, workers: int | None = 1,
            observables_used: list[str] | None = None, plot: str | Path | None = None, full=None,
-           seeds: list[int] | None = None) -> dict:
+           seeds: list[int] | None = None, on_result=None) -> dict:
     """Run the ladder and compare; returns {"table": DataFrame, "recommendation": {...},
     "extrapolation": DataFrame, "plot": path}. ``full``: the knob's full-fidelity value for the
     extrapolation (:mod:`.extrapolation`; None: the ideal limit). ``seeds``: run every rung on each
     of these packings (the case's ``seed``), so that each rung's mean carries its run-to-run
     standard error into the extrapolation; each run is compared with the reference rung's run of
-    the same seed."""
+    the same seed. ``on_result(task, result)`` is called for each run as it ends or is found complete (as in
+    :func:`.sweep.sweep`).
+    """
     import pandas as pd
     case0 = load_case(case_path)
     refuse_unknown_fields(case0, case_path, [knob], also=KNOBS, flag="--knob")
@@ -141,10 +143,14 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                 if (s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()) \
                         or s.get("status") == "unstable":
                     results[k] = _finished(t)
+                    if on_result:
+                        on_result(t, results[k])
                 else:
                     todo.append(k)
             for j, res in ex.run(run_task, [{kk: vv for kk, vv in tasks[k].items() if kk != "seed"} for k in todo]):
                 results[todo[j]] = res
+                if on_result:
+                    on_result(tasks[todo[j]], res)
             ref_v = values[-1] if reference is None else values[[str(v) for v in values].index(str(reference))]
             # the reference rung's run of each seed (the ladder's one run without seeds)
             ref_of = {t["seed"]: k for k, t in enumerate(tasks) if str(t["point"][knob]) == str(ref_v)}

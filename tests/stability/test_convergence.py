@@ -111,10 +111,12 @@ def test_the_triaxial_and_shear_cell_read_their_own_sample_checks(tmp_path):
 @pytest.mark.engine
 def test_dt_ladder(runs_root, tmp_path, engines_installed):
     # rungs below the pre-run check's safe limit for this case (0.48 of the critical step, coordination)
+    said = []          # one line a run as it ends (or is found complete): a ladder of hours says how far it is
     out = ladder(CASE, "dt_fraction", [0.4, 0.2, 0.1], engines=["liggghts"], runs_root=runs_root,
-                 target_error=0.2, plot=tmp_path / "ladder.png")
+                 target_error=0.2, plot=tmp_path / "ladder.png", on_result=lambda t, r: said.append(t["point"]))
     df = out["table"]
     assert len(df) == 3 and (df["status"] == "complete").all()
+    assert sorted(p["dt_fraction"] for p in said) == [0.1, 0.2, 0.4]
     assert df["reference"].tolist() == [False, False, True]
     assert df.loc[2, "error"] == 0.0
     assert np.isfinite(df.loc[:1, "error"]).all()
