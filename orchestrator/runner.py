@@ -203,10 +203,13 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
 
 def _reuse(case: Case, run_dir: Path, old: dict, analyze: bool) -> RunOutcome:
     """The outcome of the complete run in ``run_dir`` (summary ``old``), its analyses (re)done when
-    the case asks for others than it has."""
-    if analyze and case.analysis and old.get("analysis_specs") != case.analysis:
-        t0 = time.perf_counter()
-        record_analyses(run_dir, old, run_case_analyses(case, run_dir), case.analysis, time.perf_counter() - t0)
+    the case asks for one its record lacks, or all of them when their outputs were damaged
+    (``analysis_specs`` None). Analyses added by name (``orchestrator analyze RUN --analysis NAME``)
+    stay on record beside the case's and do not make every later ``orchestrator run`` redo them."""
+    done = old.get("analysis_specs")
+    if analyze and case.analysis and (done is None or any(spec not in done for spec in case.analysis)):
+        analyze_run(run_dir, case.analysis, by_name=done is not None)   # a damaged record is replaced
+        old = read_summary(run_dir) or old
     return RunOutcome(run_dir, "complete", old, reused=True)
 
 
@@ -245,7 +248,9 @@ def analyze_run(run_dir, specs, out_dir=None, by_name: bool = False, frames=None
     own = out_dir.resolve() == (run_dir / "analysis").resolve()
     record_path = out_dir / "analysis_summary.json"
     before = json.loads(record_path.read_text()) if by_name and record_path.exists() else {}
+    t0 = time.perf_counter()
     new = run_analyses(frames_for_analysis(frames if frames is not None else run_dir), specs, out_dir)
+    seconds = time.perf_counter() - t0
     summary = read_summary(run_dir) if own else None
     if by_name:
         done_specs = (summary or {}).get("analysis_specs") or []
@@ -254,7 +259,8 @@ def analyze_run(run_dir, specs, out_dir=None, by_name: bool = False, frames=None
     else:
         record, record_specs = new, specs
     if summary and summary.get("status") == "complete":
-        record_analyses(run_dir, summary, record, record_specs)
+        # the analysis time on record is that of the whole list, not of a few analyses added to it
+        record_analyses(run_dir, summary, record, record_specs, None if by_name else seconds)
     return new, record
 
 

@@ -224,6 +224,27 @@ def test_an_analysis_run_by_name_keeps_the_others_on_record(tmp_path):
     assert set(res) == {"friction", "d2min"} and specs == ["friction", {"d2min": {"cutoff": 2}}]
 
 
+def test_a_rerun_case_keeps_analyses_added_by_name_and_does_not_redo_its_own(tmp_path):
+    """``orchestrator run`` of a complete case reuses it: an analysis added by name since
+    (``analyze RUN --analysis rdf``) neither makes it redo the case's analyses every time nor leaves
+    the record; an analysis the case now lists and the record lacks is run, beside the others."""
+    from types import SimpleNamespace
+    from orchestrator.integrity import run_record, verify_run
+    from orchestrator.runner import _reuse, read_summary
+    run = synthetic_run(tmp_path / "run")
+    (run / "summary.json").write_text(json.dumps({"status": "complete", "integrity": run_record(run)}))
+    assert cli("analyze", run).returncode == 0                       # the case's own: displacements
+    assert cli("analyze", run, "--analysis", "rdf").returncode == 0
+    record = run / "analysis" / "analysis_summary.json"
+    stamp = record.stat().st_mtime_ns
+    out = _reuse(SimpleNamespace(analysis=["displacements"]), run, read_summary(run), True)
+    assert record.stat().st_mtime_ns == stamp and set(out.summary["analysis"]) == {"displacements", "rdf"}
+    out = _reuse(SimpleNamespace(analysis=["displacements", "coordination"]), run, read_summary(run), True)
+    assert set(json.loads(record.read_text())) == {"displacements", "rdf", "coordination"}
+    assert set(out.summary["analysis"]) == {"displacements", "rdf", "coordination"}
+    assert verify_run(run, out.summary) == []
+
+
 def test_bad_frame_index_and_analysis_options_are_one_message(tmp_path):
     """vtk --frame outside the run or not a number, an option an analysis does not take, and an
     analysis that fails on an option's value: one message each, no traceback on the screen (the
