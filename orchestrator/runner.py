@@ -49,6 +49,34 @@ class RunOutcome:
     def frames(self):
         return Frames(self.run_dir / "frames.h5")
 
+    @property
+    def results(self):
+        """The run's key figures with their errors, units and the seed's values, as a DataFrame
+        (:func:`orchestrator.results.results_frame`; empty for a run that is not complete)."""
+        from .results import results_frame          # on demand: pandas
+        return results_frame(self.run_dir)
+
+    def __repr__(self) -> str:
+        s = self.summary or {}
+        said = [self.status + (", reused" if self.reused else "")]
+        if s.get("engine"):
+            said.append(str(s["engine"]))
+        if isinstance(s.get("n_particles"), int):
+            said.append(f"{s['n_particles']:,} particles")
+        engine_s = (s.get("wall_time") or {}).get("engine")
+        if isinstance(engine_s, (int, float)):
+            said.append(f"engine {engine_s:.1f} s")
+        return f"<RunOutcome {self.run_dir}: {', '.join(said)}>"
+
+    def _repr_html_(self) -> str:
+        """In a notebook: the line of :meth:`__repr__`, then the key results of a complete run."""
+        import html
+        head = f"<p><code>{html.escape(repr(self))}</code></p>"
+        if self.status != "complete" or not (self.run_dir / "frames.h5").exists():
+            return head
+        df = self.results
+        return head + (df[["quantity", "text", "seed"]].to_html(index=False) if len(df) else "")
+
 
 def run_hash(case: Case, engine_name: str, engine_version: str, params: dict | None = None) -> str:
     """Hash of what determines a run: the resolved case, the derived numbers handed to the

@@ -158,3 +158,18 @@ def test_a_failed_check_says_so_in_words(tmp_path, monkeypatch):
     lines = buf.getvalue().splitlines()
     assert any("a check" in l and "FAIL" in l for l in lines)
     assert not any("a passed one" in l and "FAIL" in l for l in lines)
+
+
+def test_a_run_outcome_shows_itself_in_one_line_and_its_results_in_a_notebook(tmp_path):
+    """``run_case`` returns a RunOutcome: in a notebook it shows one line (status, engine, size,
+    engine time) and the run's key results, not its whole summary dict."""
+    from test_faults import synthetic_run
+    from orchestrator.runner import RunOutcome
+    run = synthetic_run(tmp_path / "run")
+    summary = {"engine": "liggghts", "n_particles": 1025, "wall_time": {"engine": 12.345}, "stability": {"x": list(range(99))}}
+    out = RunOutcome(run, "complete", summary, reused=True)
+    assert repr(out) == f"<RunOutcome {run}: complete, reused, liggghts, 1,025 particles, engine 12.3 s>"
+    page = out._repr_html_()
+    assert "<table" in page and "substitutions" in page and "range" not in page and "99" not in page
+    assert list(out.results.columns[:2]) == ["quantity", "text"]
+    assert "<table" not in RunOutcome(tmp_path / "none", "failed", {})._repr_html_()
