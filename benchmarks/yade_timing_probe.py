@@ -1,15 +1,18 @@
 """Where a YADE run's time goes: YADE's own per-engine timing over a few steps from the run's last
 checkpoint, in a copy of the run directory (the run itself is left untouched).
 
-    python benchmarks/yade_timing_probe.py RUN_DIR [--steps 1000]
+    python benchmarks/yade_timing_probe.py RUN_DIR [--steps 1000] [--threads 1 2]
 
-Prints the steps per CPU second, the interactions (potential and real) and ``yade.timing.stats()``
-(``O.timingEnabled``: the share of every engine, the orchestrator's PyRunners among them).
+Prints the steps per CPU second and per wall second, the interactions (potential and real) and
+``yade.timing.stats()`` (``O.timingEnabled``: the share of every engine, the orchestrator's
+PyRunners among them). ``--threads``: YADE's OpenMP threads (``yade -j N``), one probe each, from
+the same checkpoint: the wall-time speed-up of N threads over the first (on a quiet machine).
 docs/validation.md quotes it for the medium clump triaxial (session 24), docs/engines.md for the shear cell.
 """
 from __future__ import annotations
 
 import argparse
+import re
 import shutil
 import subprocess
 import sys
@@ -19,10 +22,11 @@ from pathlib import Path
 PROBE = '''
 O.timingEnabled = True
 from yade import timing
-_t0, _i0 = time.process_time(), O.iter
+_t0, _w0, _i0 = time.process_time(), time.perf_counter(), O.iter
 O.run({steps}, True)
-print("PROBE steps per CPU second %.2f; interactions %d, real %d" % (
-    (O.iter - _i0) / (time.process_time() - _t0), len(O.interactions), O.interactions.countReal()), flush=True)
+print("PROBE steps per CPU second %.2f, per wall second %.2f; interactions %d, real %d" % (
+    (O.iter - _i0) / (time.process_time() - _t0), (O.iter - _i0) / (time.perf_counter() - _w0),
+    len(O.interactions), O.interactions.countReal()), flush=True)
 timing.stats()
 sys.stdout.flush()
 os._exit(0)
@@ -37,17 +41,29 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--threads", type=int, nargs="+", default=[1], help="YADE's OpenMP threads, a probe each")
     a = ap.parse_args(argv)
     run = a.run_dir
     if not (run / "checkpoint.yade.gz").exists() or not ((run / "resume.py").exists() or (run / "script.py").exists()):
         print(f"error: {run}: no checkpoint.yade.gz and YADE script here (a YADE run that has checkpointed)", file=sys.stderr)
         return 2
-    with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
-        probe = probe_script(run, Path(tmp), PROBE.format(steps=int(a.steps)))
-        out = subprocess.run(["yade", "-n", "-j", "1", "-x", probe.name], cwd=tmp, capture_output=True, text=True)
-        text = out.stdout[out.stdout.find("PROBE"):] if "PROBE" in out.stdout else out.stdout + out.stderr
-        print(text)
-        return 0 if "PROBE" in out.stdout else 1
+    wall = {}
+    for threads in a.threads:
+        with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
+            probe = probe_script(run, Path(tmp), PROBE.format(steps=int(a.steps)))
+            out = subprocess.run(["yade", "-n", "-j", str(threads), "-x", probe.name], cwd=tmp, capture_output=True,
+                                 text=True)
+        if "PROBE" not in out.stdout:
+            print(out.stdout + out.stderr)
+            return 1
+        text = out.stdout[out.stdout.find("PROBE"):]
+        print(f"-j {threads}: {text}")
+        wall[threads] = float(re.search(r"per wall second ([\d.]+)", text).group(1))
+    first = a.threads[0]
+    for threads, speed in wall.items():
+        if threads != first:
+            print(f"{threads} threads against {first}: {speed / wall[first]:.2f}x the steps per wall second")
+    return 0
 
 
 def probe_script(run: Path, tmp: Path, tail: str) -> Path:
