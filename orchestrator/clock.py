@@ -245,16 +245,24 @@ SPEED_KEEP = 12
 
 
 def machine_id() -> str:
-    """This machine's CPU model and core count (``/proc/cpuinfo``): the key of its speed record."""
-    model = ""
+    """This machine's CPU (``/proc/cpuinfo``: model name, and its family and model numbers where the
+    name alone does not tell the generation) and core count: the key of its speed record and the
+    ``machine`` of the entries fitted on it. A virtual machine's CPU may call itself "AMD EPYC" on
+    every generation: two such 2-core machines of this project's ran its decks 1.2-1.4x apart
+    (the smoke cases, session 29), so the name alone would take one's table as fitted on the other."""
+    info: dict = {}
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
+            key, _, value = line.partition(":")
+            info.setdefault(key.strip(), value.strip())
+            if not line.strip():                  # the first processor's block is enough
                 break
     except OSError:
         pass
-    return f"{model or platform.processor() or platform.machine()} x{os.cpu_count()}"
+    model = info.get("model name") or platform.processor() or platform.machine()
+    if info.get("cpu family") and info.get("model"):
+        model += f" (family {info['cpu family']}, model {info['model']})"
+    return f"{model} x{os.cpu_count()}"
 
 
 def speed_table_path() -> Path:
