@@ -1,12 +1,14 @@
 """Where a YADE run's time goes: YADE's own per-engine timing over a few steps from the run's last
 checkpoint, in a copy of the run directory (the run itself is left untouched).
 
-    python benchmarks/yade_timing_probe.py RUN_DIR [--steps 1000] [--threads 1 2]
+    python benchmarks/yade_timing_probe.py RUN_DIR [--steps 1000] [--threads 1 2] [--verlet-dist D]
 
 Prints the steps per CPU second and per wall second, the interactions (potential and real) and
 ``yade.timing.stats()`` (``O.timingEnabled``: the share of every engine, the orchestrator's
 PyRunners among them). ``--threads``: YADE's OpenMP threads (``yade -j N``), one probe each, from
 the same checkpoint: the wall-time speed-up of N threads over the first (on a quiet machine).
+``--verlet-dist``: the collider's sweep distance for the probe (YADE's ``verletDist``; negative: a
+fraction of the smallest radius, the decks keep YADE's -0.5), 50 steps before the timing.
 docs/validation.md quotes it for the medium clump triaxial (session 24), docs/engines.md for the shear cell.
 """
 from __future__ import annotations
@@ -20,6 +22,7 @@ import tempfile
 from pathlib import Path
 
 PROBE = '''
+{verlet}
 O.timingEnabled = True
 from yade import timing
 _t0, _w0, _i0 = time.process_time(), time.perf_counter(), O.iter
@@ -30,6 +33,14 @@ print("PROBE steps per CPU second %.2f, per wall second %.2f; interactions %d, r
 timing.stats()
 sys.stdout.flush()
 os._exit(0)
+'''
+#: the collider's sweep distance set before the probe, and 50 steps for it to rebuild its pairs
+VERLET = '''
+for _e in O.engines:
+    if isinstance(_e, Collider):
+        _e.verletDist = {dist}
+O.run(50, True)
+print("verletDist", {dist}, flush=True)
 '''
 #: what a resumed YADE deck reads besides its checkpoint
 FILES = ("checkpoint.yade.gz", "clumps.txt", "particles.txt", "params.json", "resume.py", "triax.txt", "walls.yade.*.npy")
@@ -42,6 +53,7 @@ def main(argv=None) -> int:
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--threads", type=int, nargs="+", default=[1], help="YADE's OpenMP threads, a probe each")
+    ap.add_argument("--verlet-dist", type=float, default=None, help="the collider's verletDist for the probe")
     a = ap.parse_args(argv)
     run = a.run_dir
     if not (run / "checkpoint.yade.gz").exists() or not ((run / "resume.py").exists() or (run / "script.py").exists()):
@@ -50,7 +62,8 @@ def main(argv=None) -> int:
     wall = {}
     for threads in a.threads:
         with tempfile.TemporaryDirectory(prefix="yade_probe_") as tmp:
-            probe = probe_script(run, Path(tmp), PROBE.format(steps=int(a.steps)))
+            probe = probe_script(run, Path(tmp), PROBE.format(steps=int(a.steps), verlet=VERLET.format(
+                dist=a.verlet_dist) if a.verlet_dist is not None else ""))
             out = subprocess.run(["yade", "-n", "-j", str(threads), "-x", probe.name], cwd=tmp, capture_output=True,
                                  text=True)
         if "PROBE" not in out.stdout:
