@@ -40,7 +40,6 @@ for _e in O.engines:
     if isinstance(_e, Collider):
         _e.verletDist = {dist}
 O.run(50, True)
-print("verletDist", {dist}, flush=True)
 '''
 #: what a resumed YADE deck reads besides its checkpoint
 FILES = ("checkpoint.yade.gz", "clumps.txt", "particles.txt", "params.json", "resume.py", "triax.txt", "walls.yade.*.npy")

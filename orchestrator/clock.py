@@ -55,6 +55,7 @@ checkout, ``--package`` writes the shipped table itself).
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -82,7 +83,7 @@ ASSUMED_PARALLEL_EFFICIENCY = 0.7
 
 #: an estimate for more than this many times the largest run its entry was fitted on says it is an
 #: extrapolation: there the fitted curve's form decides the figure (docs/validation.md, the clock: YADE's
-#: shear-cell entry put its medium case at 7.3 h or 5.1 h by the runs chosen, 9.9 h once refitted)
+#: shear-cell entry has put its medium case at 5.1 h to 9.9 h by the runs it was fitted on)
 EXTRAPOLATION_NOTE = 1.5
 
 
@@ -244,12 +245,14 @@ def load_table(user: dict | None = None) -> dict:
 SPEED_KEEP = 12
 
 
+@functools.lru_cache(maxsize=1)
 def machine_id() -> str:
     """This machine's CPU (``/proc/cpuinfo``: model name, and its family and model numbers where the
     name alone does not tell the generation) and core count: the key of its speed record and the
     ``machine`` of the entries fitted on it. A virtual machine's CPU may call itself "AMD EPYC" on
-    every generation: two such 2-core machines of this project's ran its decks 1.2-1.4x apart
-    (the smoke cases, session 29), so the name alone would take one's table as fitted on the other."""
+    every generation: on the second such 2-core machine of this project's, the first one's table read
+    0.91-1.46 of the smoke cases' run times (session 29, ``benchmarks/bench_estimate.py``), so the name
+    alone would take one's table as fitted on the other."""
     info: dict = {}
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -837,13 +840,14 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False, add: bool 
     out = Path(out) if out else user_table_path()
     old = json.loads(out.read_text()) if out.is_file() else {}
     fitted: dict = {}
-    kept: dict = {}
+    entries: dict = {}          # (engine, scene) -> the table entry to write, the runs it keeps included
     for (eng, sc), smp in sorted(groups.items()):
         if not steps_only:
             if add:
                 smp = _with_kept_samples(smp, (old.get(eng) or {}).get(sc), f"{eng} {sc}")
-            fitted.setdefault(eng, {})[sc] = replace(fit(smp), machine=machine_id())
-            kept.setdefault(eng, {})[sc] = [x.to_row() for x in smp]
+            tp = replace(fit(smp), machine=machine_id())
+            fitted.setdefault(eng, {})[sc] = tp
+            entries[eng, sc] = asdict(tp) | {"samples": [x.to_row() for x in smp]}
             continue
         units = [x.units for x in smp if x.units is not None]
         entry = (old.get(eng) or {}).get(sc)
@@ -854,10 +858,9 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False, add: bool 
         entry["note"] = (re.sub(r"; [\d.e+-]+ units \(median of \d+\)", "", entry.get("note", ""))
                          + f"; {med:g} units (median of {len(units)}, steps refreshed alone)")
         fitted.setdefault(eng, {})[sc] = Throughput.from_dict(entry)
-    for eng, scenes in fitted.items():
-        old.setdefault(eng, {}).update({sc: asdict(tp) | ({"samples": kept[eng][sc]} if sc in kept.get(eng, {}) else
-                                                          {"samples": (old.get(eng) or {}).get(sc, {}).get("samples", [])})
-                                        for sc, tp in scenes.items()})
+        entries[eng, sc] = entry             # its costs and the runs it keeps unchanged
+    for (eng, sc), entry in entries.items():
+        old.setdefault(eng, {})[sc] = entry
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text(out, json.dumps(old, indent=1, sort_keys=True) + "\n")     # atomic, keeps the umask
     return fitted

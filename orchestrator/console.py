@@ -6,7 +6,8 @@ Printed into a file or a pipe (a ladder's log under nohup), the width is 200 col
 rich's 80, which cut a sweep's table of fourteen columns to a letter or two each.
 rich is imported on first use, not with the command modules (validate within 2 s, #16).
 """
-
+import os
+import sys
 
 #: columns of a table printed into a file or a pipe (no terminal to fit)
 LOG_WIDTH = 200
@@ -14,8 +15,6 @@ LOG_WIDTH = 200
 
 def console(stderr: bool = False):
     """A ``rich.console.Console`` on stdout (or stderr) that never hard-wraps text."""
-    import os
-    import sys
     from rich.console import Console
     stream = sys.stderr if stderr else sys.stdout
     tty = hasattr(stream, "isatty") and stream.isatty()
