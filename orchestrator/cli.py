@@ -299,9 +299,48 @@ def cmd_vtk(args) -> int:
     return 0
 
 
+def cmd_status(args) -> int:
+    """``orchestrator status [PATH ...]``: how far each run got, its engine time so far and the time
+    left (orchestrator.run_status)."""
+    from rich.markup import escape
+    from rich.table import Table
+    from .atomic import write_text
+    from .run_status import status_table
+    from .sizing import fmt_s
+    df = status_table(args.paths)
+    con = console()
+    if df.empty:
+        con.print(f"no runs under {', '.join(args.paths)} (a run directory holds a summary.json)")
+        return 0
+    import os
+    dirs = [os.path.abspath(d) for d in df.run_dir]
+    root = os.path.commonpath([os.path.dirname(os.path.dirname(d)) for d in dirs])   # runs/<case>/<engine-hash>
+    t = Table(title=f"Runs under {root}: engine time so far and left (CPU time on one rank, wall time on several)")
+    for col in ("run", "status", "grains", "step", "tries", "engine time", "steps/s", "left: pace", "left: clock"):
+        t.add_column(col, justify="left" if col in ("run", "status") else "right", overflow="fold",
+                     no_wrap=col != "run")
+    colour = {"complete": "green", "running": "cyan", "interrupted": "yellow"}
+    for label, r in zip((os.path.relpath(d, root) for d in dirs), df.itertuples()):
+        def secs(x):
+            return "-" if x != x or (x == 0 and r.status == "complete") else fmt_s(x)
+        st = f"[{colour.get(r.status, 'red')}]{escape(r.status)}[/]"
+        step = ("-" if r.step != r.step or r.step is None else
+                f"{int(r.step):,}/{int(r.steps):,} ({100 * r.done:.0f} %)" if r.done == r.done else f"{int(r.step):,}")
+        t.add_row(escape(label), st, f"{r.n_particles:,}" if r.n_particles == r.n_particles and r.n_particles else "-",
+                  step, str(r.attempts), secs(r.engine_s), "-" if r.pace != r.pace else f"{r.pace:.0f}",
+                  secs(r.left_pace_s), secs(r.left_clock_s))
+    con.print(t)
+    if (df.status == "interrupted").any():
+        con.print("[yellow]an interrupted run resumes from its last restart point when the command that started it "
+                  "is run again[/yellow]")
+    if args.csv:
+        write_text(args.csv, df.to_csv(index=False))
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------
 #: the commands defined in this module; the others come from command groups (ct, compare, stability)
-CORE_COMMANDS = ("run", "validate", "engines", "verify", "analyze", "vtk")
+CORE_COMMANDS = ("run", "validate", "engines", "verify", "analyze", "vtk", "status")
 
 
 def build_parser(argv=None) -> argparse.ArgumentParser:
@@ -367,6 +406,12 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     k.add_argument("--frame", default="-1", help="frame index or 'all' (default: last)")
     k.add_argument("--out", help="output directory (default RUN_DIR/vtk)")
     k.set_defaults(func=cmd_vtk)
+
+    st = sub.add_parser("status", help="how far runs got, their engine time so far and the time left")
+    st.add_argument("paths", nargs="*", default=["runs"], metavar="PATH",
+                    help="run directories or runs trees (default: ./runs)")
+    st.add_argument("--csv", help="also write the table as CSV")
+    st.set_defaults(func=cmd_status)
 
     first = next((a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")), None)
     if first in CORE_COMMANDS:

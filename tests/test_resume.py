@@ -15,6 +15,7 @@ import pytest
 from orchestrator.attempts import read_attempts, run_cost
 from orchestrator.clock import samples_from_runs
 from orchestrator.frames import Frames
+from orchestrator.run_status import run_status
 from resume_util import kill_run, rerun_resumes
 
 pytestmark = pytest.mark.engine
@@ -64,6 +65,9 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
             time.sleep(0.05)
         assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
     kill_run(proc, run_dir)
+    st = run_status(run_dir)                      # what `orchestrator status` prints of it
+    assert st["status"] == "interrupted" and st["attempts"] == 1 and st["engine_s"] > 0
+    assert 0 < st["step"] < st["steps"] and 0 < st["done"] < 1 and st["left_pace_s"] > 0
     rerun_resumes(orchestrator("run", str(case), "--engine", engine, "--runs", str(runs), "--quiet"),
                   run_dir, timeout=600)
     # the engine time of both attempts is on record, and the clock counts the resumed run with it
@@ -75,6 +79,9 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
     cost = run_cost(att, summary["steps_run"], use_cpu=True)
     assert cost is not None and cost > 0          # (run_cost's arithmetic: tests/test_attempts.py)
     assert samples_from_runs([run_dir])[0].engine_s == pytest.approx(cost)
+    st = run_status(run_dir)
+    assert st["status"] == "complete" and st["done"] == 1 and st["attempts"] == 2
+    assert st["engine_s"] == pytest.approx(cost)
 
     ref_runs = tmp_path / "ref"
     ref = subprocess.run(orchestrator("run", str(case), "--engine", engine, "--runs", str(ref_runs), "--quiet"),

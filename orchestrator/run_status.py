@@ -1,0 +1,127 @@
+"""Where runs stand: how far each got, what it has cost and how long the rest should take
+(``orchestrator status``; the Python API :func:`status_table`).
+
+A medium case runs for hours, and a session, a batch job's time limit or a reboot may stop it
+part-way; running the same command again resumes it from its last restart point (docs/engines.md,
+Resume). This module reads, without starting anything, what a run writes as it goes: its
+``summary.json`` (the case, the engine, the planned steps, the clock's estimate before the run,
+whether it is complete) and its ``attempts.json`` (:mod:`orchestrator.attempts`: the steps, wall
+and CPU time of every attempt, rewritten every 5 s while the engine runs).
+
+A run found ``running`` that no live process holds is reported ``interrupted``
+(:func:`orchestrator.runner.read_summary`, which also marks it so on disk).
+
+The time left comes two ways, neither exact (docs/validation.md, the clock):
+
+- ``left_pace_s``: the steps left at the pace of the latest attempt (steps per engine second).
+  A later stage that costs more per step (a shear cell's shear stage after its compression, where
+  the grains are denser and touch more; a triaxial's loading after its drag-held stage 1) makes the
+  true figure longer;
+- ``left_clock_s``: the clock's estimate before the run times the share of the steps left
+  (:mod:`orchestrator.clock`), which knows nothing of how this run has gone so far.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from .attempts import read_attempts
+from .clock import run_engine_seconds
+from .runner import read_summary
+
+__all__ = ["run_status", "status_table", "find_runs", "COLUMNS"]
+
+#: the columns of :func:`status_table`, in order (times in seconds of engine time)
+COLUMNS = ["run_dir", "case", "engine", "status", "n_particles", "step", "steps", "done", "attempts",
+           "engine_s", "pace", "left_pace_s", "left_clock_s", "estimated_s"]
+
+
+def find_runs(paths) -> list[Path]:
+    """The run directories (those holding a ``summary.json``) among ``paths``: each path a run
+    directory or a tree of them (a ``--runs`` directory, a ladder's). Raises FileNotFoundError for a
+    path that does not exist."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if not p.exists():
+            raise FileNotFoundError(2, "no such run directory or runs tree", str(p))
+        if (p / "summary.json").exists():
+            out.append(p)
+        else:
+            out.extend(sorted(s.parent for s in p.rglob("summary.json")))
+    seen: set[Path] = set()
+    return [d for d in out if not (d.resolve() in seen or seen.add(d.resolve()))]
+
+
+def _attempt_seconds(a: dict) -> float | None:
+    """An attempt's engine time [s]: its CPU time on one rank (what the clock fits; the wall time
+    of a run that shared its cores is longer), its wall time on several (a rank polls while it
+    waits); None when not recorded."""
+    cpu, wall = a.get("cpu_s"), a.get("wall_s")
+    if int(a.get("ranks") or 1) == 1 and isinstance(cpu, (int, float)) and cpu > 0:
+        return float(cpu)
+    return float(wall) if isinstance(wall, (int, float)) and wall > 0 else None
+
+
+def _latest_pace(attempts: list[dict]) -> float:
+    """Steps per engine second [1/s] of the latest attempt that made progress; NaN without one."""
+    for a in reversed(attempts):
+        first, last, t = a.get("first_step"), a.get("last_step"), _attempt_seconds(a)
+        if isinstance(first, int) and isinstance(last, int) and last > first and t:
+            return (last - first) / t
+    return float("nan")
+
+
+def run_status(run_dir) -> dict:
+    """One run's state (the keys of :data:`COLUMNS`; NaN where a figure is not known):
+
+    - ``status``: ``complete``, ``running`` (a live process holds the run), ``interrupted`` (resume
+      it by running the same command again), ``failed``, ``unstable``, ...;
+    - ``step``, ``steps``: the furthest step reached and the steps planned [-]; ``done`` their ratio;
+    - ``attempts``: how many times the engine was started on it;
+    - ``engine_s``: the engine time spent so far [s], the steps a resume repeated included (a
+      complete run's: :func:`orchestrator.clock.run_engine_seconds`, what an uninterrupted run would
+      have taken);
+    - ``pace``: steps per engine second of the latest attempt [1/s];
+    - ``left_pace_s``, ``left_clock_s``: the engine time left [s] at that pace and by the clock's
+      estimate before the run (the module docstring); 0 for a complete run;
+    - ``estimated_s``: the clock's estimate of the whole run before it started [s].
+    """
+    run_dir = Path(run_dir)
+    s = read_summary(run_dir) or {}
+    attempts = read_attempts(run_dir)
+    nan = float("nan")
+    steps = int(s.get("steps_run") or s.get("steps") or 0) or None
+    status = s.get("status", "unknown")
+    reached = max((a["last_step"] for a in attempts if isinstance(a.get("last_step"), int)), default=None)
+    est = s.get("estimated_engine_time_s")
+    est = float(est) if isinstance(est, (int, float)) else nan
+    pace = _latest_pace(attempts)
+    if status == "complete":
+        reached = steps
+        spent = run_engine_seconds(run_dir, s)
+        left_pace = left_clock = 0.0
+    else:
+        times = [_attempt_seconds(a) for a in attempts]
+        spent = sum(times) if times and None not in times else None
+        left = max(steps - reached, 0) if steps and reached is not None else None
+        left_pace = left / pace if left is not None and pace == pace else nan
+        left_clock = est * left / steps if left is not None else nan
+    return {
+        "run_dir": str(run_dir), "case": s.get("case", ""), "engine": s.get("engine", ""), "status": status,
+        "n_particles": s.get("n_particles"), "step": reached, "steps": steps,
+        "done": reached / steps if steps and reached is not None else nan,
+        "attempts": len(attempts), "engine_s": nan if spent is None else float(spent), "pace": pace,
+        "left_pace_s": left_pace, "left_clock_s": left_clock, "estimated_s": est,
+    }
+
+
+def status_table(paths="runs") -> pd.DataFrame:
+    """Every run under ``paths`` (a run directory, a runs tree, or a list of them), a row each
+    (:func:`run_status`), as a plain DataFrame with the :data:`COLUMNS`::
+
+        import orchestrator.run_status as rs
+        rs.status_table("runs").query("status != 'complete'")[["case", "engine", "done", "left_pace_s"]]
+    """
+    dirs = find_runs([paths] if isinstance(paths, (str, Path)) else paths)
+    return pd.DataFrame([run_status(d) for d in dirs], columns=COLUMNS)

@@ -1,0 +1,105 @@
+"""``orchestrator status`` (orchestrator.run_status): how far a run got, its engine time so far and
+the time left, read from the run's summary.json and attempts.json as the runner writes them. The
+runs here are such records written by hand; tests/test_resume.py reads a real engine's, killed and
+resumed."""
+from __future__ import annotations
+
+import fcntl
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from orchestrator.attempts import run_cost
+from orchestrator.run_status import COLUMNS, run_status, status_table
+
+
+def write_run(d, summary: dict, attempts: list[dict]):
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text(json.dumps({"case": "c", "engine": "yade", "n_particles": 100, **summary}))
+    (d / "attempts.json").write_text(json.dumps(attempts))
+    return d
+
+
+def attempt(first, last, cpu, wall, ranks=1, done=False):
+    return {"first_step": first, "last_step": last, "cpu_s": cpu, "wall_s": wall, "ranks": ranks, "done": done}
+
+
+#: killed at step 1 000, resumed from the checkpoint at 900 and killed again at 1 500 (one rank)
+KILLED_TWICE = [attempt(0, 1000, 10.0, 30.0), attempt(900, 1500, 5.0, 6.0)]
+
+
+def test_interrupted_run_steps_time_so_far_and_left(tmp_path):
+    d = write_run(tmp_path / "runs" / "c" / "yade-1", {"status": "running", "steps": 3000,
+                                                        "estimated_engine_time_s": 60.0}, KILLED_TWICE)
+    st = run_status(d)
+    assert st["status"] == "interrupted"              # 'running' on disk, no live process holds it
+    assert (st["step"], st["steps"], st["attempts"]) == (1500, 3000, 2)
+    assert st["done"] == pytest.approx(0.5)
+    assert st["engine_s"] == pytest.approx(15.0)      # CPU on one rank, the repeated 100 steps included
+    assert st["pace"] == pytest.approx(600 / 5.0)     # the latest attempt's steps per CPU second
+    assert st["left_pace_s"] == pytest.approx(1500 / 120.0)
+    assert st["left_clock_s"] == pytest.approx(60.0 * 1500 / 3000)
+
+
+def test_running_run_is_reported_running(tmp_path):
+    d = write_run(tmp_path / "r", {"status": "running", "steps": 3000}, KILLED_TWICE[:1])
+    with open(d / ".lock", "w") as fh:                 # a live owner, as the runner holds it
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        st = run_status(d)
+    assert st["status"] == "running" and st["step"] == 1000
+    assert math.isnan(st["left_clock_s"])              # no estimate recorded: not made up
+
+
+def test_several_ranks_are_timed_by_the_wall_clock(tmp_path):
+    d = write_run(tmp_path / "r", {"status": "failed", "steps": 2000},
+                  [attempt(0, 1000, 38.0, 20.0, ranks=2)])
+    st = run_status(d)
+    assert st["engine_s"] == pytest.approx(20.0) and st["pace"] == pytest.approx(50.0)
+
+
+def test_complete_resumed_run_costs_what_an_uninterrupted_one_would(tmp_path):
+    att = [attempt(0, 1000, 10.0, 30.0), attempt(900, 3000, 21.0, 22.0, done=True)]
+    d = write_run(tmp_path / "r", {"status": "complete", "steps": 3000, "steps_run": 3000, "attempts": att,
+                                    "resumed_from": {"checkpoint": "checkpoint.yade.gz"},
+                                    "wall_time": {"engine": 22.0, "engine_cpu": 21.0}}, att)
+    st = run_status(d)
+    assert st["status"] == "complete" and st["done"] == 1.0 and st["step"] == 3000
+    assert st["engine_s"] == pytest.approx(run_cost(att, 3000, use_cpu=True))   # 10 + 21 * 2000/2100
+    assert st["left_pace_s"] == 0 and st["left_clock_s"] == 0
+
+
+def test_table_finds_every_run_of_a_tree_once(tmp_path):
+    a = write_run(tmp_path / "runs" / "c" / "yade-1", {"status": "running", "steps": 3000}, KILLED_TWICE)
+    write_run(tmp_path / "runs" / "c" / "yade-2", {"status": "running", "steps": 3000}, KILLED_TWICE)
+    df = status_table([tmp_path / "runs", a])         # a run named twice is one row
+    assert isinstance(df, pd.DataFrame) and list(df.columns) == COLUMNS and len(df) == 2
+    assert status_table(tmp_path / "runs" / "c" / "yade-1").shape[0] == 1
+
+
+def orc(*args):
+    """The command in a 160-column terminal (an 80-column one folds the table's cells)."""
+    return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True,
+                          text=True, timeout=60, env={**os.environ, "COLUMNS": "160"})
+
+
+def test_cli_prints_the_runs_and_writes_csv(tmp_path):
+    write_run(tmp_path / "runs" / "c" / "yade-1", {"status": "running", "steps": 3000,
+                                                   "estimated_engine_time_s": 60.0}, KILLED_TWICE)
+    out = orc("status", tmp_path / "runs", "--csv", tmp_path / "s.csv")
+    assert out.returncode == 0, out.stderr
+    assert "interrupted" in out.stdout and "1,500/3,000 (50 %)" in out.stdout
+    assert "run again" in out.stdout
+    assert pd.read_csv(tmp_path / "s.csv")["step"].tolist() == [1500]
+
+
+def test_cli_bad_and_empty_paths(tmp_path):
+    out = orc("status", tmp_path / "nowhere")
+    assert out.returncode == 2 and "nowhere" in out.stderr and "Traceback" not in out.stderr
+    (tmp_path / "empty").mkdir()
+    out = orc("status", tmp_path / "empty")
+    assert out.returncode == 0 and "no runs under" in out.stdout
