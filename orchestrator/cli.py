@@ -307,10 +307,15 @@ def cmd_status(args) -> int:
     from .atomic import write_text
     from .run_status import status_table
     from .sizing import fmt_s
-    df = status_table(args.paths)
     con = console()
+    paths = args.paths or ["runs"]
+    if not args.paths and not Path("runs").is_dir():
+        con.print("no runs here yet: no ./runs directory (`orchestrator run CASE` makes it; or give the --runs "
+                  "directory the runs went to)")
+        return 0
+    df = status_table(paths)
     if df.empty:
-        con.print(f"no runs under {', '.join(args.paths)} (a run directory holds a summary.json)")
+        con.print(f"no runs under {', '.join(paths)} (a run directory holds a summary.json)")
         return 0
     import os
     dirs = [os.path.abspath(d) for d in df.run_dir]
@@ -408,7 +413,7 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     k.set_defaults(func=cmd_vtk)
 
     st = sub.add_parser("status", help="how far runs got, their engine time so far and the time left")
-    st.add_argument("paths", nargs="*", default=["runs"], metavar="PATH",
+    st.add_argument("paths", nargs="*", metavar="PATH",
                     help="run directories or runs trees (default: ./runs)")
     st.add_argument("--csv", help="also write the table as CSV")
     st.set_defaults(func=cmd_status)

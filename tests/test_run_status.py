@@ -81,10 +81,10 @@ def test_table_finds_every_run_of_a_tree_once(tmp_path):
     assert status_table(tmp_path / "runs" / "c" / "yade-1").shape[0] == 1
 
 
-def orc(*args):
+def orc(*args, cwd=None):
     """The command in a 160-column terminal (an 80-column one folds the table's cells)."""
     return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True,
-                          text=True, timeout=60, env={**os.environ, "COLUMNS": "160"})
+                          text=True, timeout=60, env={**os.environ, "COLUMNS": "160"}, cwd=cwd)
 
 
 def test_cli_prints_the_runs_and_writes_csv(tmp_path):
@@ -103,3 +103,5 @@ def test_cli_bad_and_empty_paths(tmp_path):
     (tmp_path / "empty").mkdir()
     out = orc("status", tmp_path / "empty")
     assert out.returncode == 0 and "no runs under" in out.stdout
+    out = orc("status", cwd=tmp_path / "empty")      # no ./runs yet: said, not an error
+    assert out.returncode == 0 and "no runs here yet" in out.stdout
