@@ -14,6 +14,7 @@ import sys
 import pandas as pd
 import pytest
 
+import orchestrator
 from orchestrator.attempts import run_cost
 from orchestrator.run_status import COLUMNS, run_status, status_table
 
@@ -79,6 +80,7 @@ def test_table_finds_every_run_of_a_tree_once(tmp_path):
     df = status_table([tmp_path / "runs", a])         # a run named twice is one row
     assert isinstance(df, pd.DataFrame) and list(df.columns) == COLUMNS and len(df) == 2
     assert status_table(tmp_path / "runs" / "c" / "yade-1").shape[0] == 1
+    assert orchestrator.status(tmp_path / "runs").equals(status_table(tmp_path / "runs"))   # the notebook name
 
 
 def orc(*args, cwd=None):
