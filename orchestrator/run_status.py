@@ -39,13 +39,18 @@ COLUMNS = ["run_dir", "case", "engine", "status", "n_particles", "step", "steps"
 
 def find_runs(paths) -> list[Path]:
     """The run directories (those holding a ``summary.json``) among ``paths``: each path a run
-    directory or a tree of them (a ``--runs`` directory, a ladder's). Raises FileNotFoundError for a
-    path that does not exist."""
+    directory (or its ``summary.json``) or a tree of them (a ``--runs`` directory, a ladder's).
+    Raises FileNotFoundError for a path that does not exist, ValueError for another file."""
     out: list[Path] = []
     for p in map(Path, paths):
         if not p.exists():
             raise FileNotFoundError(2, "no such run directory or runs tree", str(p))
-        if (p / "summary.json").exists():
+        if p.is_file() and p.name != "summary.json":
+            raise ValueError(f"{p}: a file, not a run directory; give the directory `orchestrator run` wrote "
+                             "(runs/<case>/<engine>-<hash>) or the runs tree above it (--runs)")
+        if p.name == "summary.json":
+            out.append(p.parent)
+        elif (p / "summary.json").exists():
             out.append(p)
         else:
             out.extend(sorted(s.parent for s in p.rglob("summary.json")))

@@ -107,3 +107,6 @@ def test_cli_bad_and_empty_paths(tmp_path):
     assert out.returncode == 0 and "no runs under" in out.stdout
     out = orc("status", cwd=tmp_path / "empty")      # no ./runs yet: said, not an error
     assert out.returncode == 0 and "no runs here yet" in out.stdout
+    (tmp_path / "case.yaml").write_text("name: x\n")
+    out = orc("status", tmp_path / "case.yaml")
+    assert out.returncode == 2 and "case.yaml" in out.stderr and "Traceback" not in out.stderr
