@@ -9,7 +9,7 @@ whether it is complete) and its ``attempts.json`` (:mod:`orchestrator.attempts`:
 and CPU time of every attempt, rewritten every 5 s while the engine runs).
 
 A run found ``running`` that no live process holds is reported ``interrupted``
-(:func:`orchestrator.runner.read_summary`, which also marks it so on disk).
+(:func:`orchestrator.run_summary.read_summary`, which also marks it so on disk).
 
 The time left comes two ways, neither exact (docs/validation.md, the clock):
 
@@ -28,7 +28,7 @@ import pandas as pd
 
 from .attempts import read_attempts
 from .clock import run_engine_seconds
-from .runner import read_summary
+from .run_summary import read_summary
 
 __all__ = ["run_status", "status_table", "find_runs", "COLUMNS"]
 

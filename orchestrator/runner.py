@@ -32,6 +32,7 @@ from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
 from .params import Params, thaw
 from .registry import get_engine, get_scene
+from .run_summary import lock_held, read_summary
 from .resources import data_file
 from .stability.monitors import read_verdict
 from .integrity import verify_run, run_record
@@ -111,47 +112,6 @@ def run_dir_for(case: Case, engine_name: str, runs_root="runs") -> Path:
     return Path(runs_root) / case.name / f"{engine_name}-{run_hash(case, engine_name, eng.version())}"
 
 
-def read_summary(run_dir) -> dict | None:
-    """The run's summary.json; a run found ``running`` whose lock no live process holds (its
-    orchestrator was killed) is marked ``interrupted`` on disk and in the answer."""
-    p = Path(run_dir) / "summary.json"
-    if not p.exists():
-        return None
-    try:
-        s = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        return {"status": "interrupted", "error": f"{p}: unreadable (cut short); the run is resumed or redone"}
-    if s.get("status") == "running" and not _lock_held(Path(run_dir)):
-        s["status"] = "interrupted"
-        s["interrupted"] = {"found": time.strftime("%Y-%m-%dT%H:%M:%S"), "pid": s.get("pid"),
-                            "note": "found 'running' with no live owner (its process was killed)"}
-        try:
-            write_json(p, s)
-        except OSError:                  # a read-only run directory: report it, leave the file
-            pass
-    return s
-
-
-def _lock_held(run_dir: Path) -> bool:
-    """True when some live process holds the run directory's lock (flock: released by the kernel
-    when its owner dies, so a stale lock file is never held)."""
-    import fcntl
-    lock = run_dir / ".lock"
-    if not lock.exists():
-        return False
-    try:
-        fh = open(lock, "r")
-    except OSError:
-        return False
-    with fh:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return True
-        fcntl.flock(fh, fcntl.LOCK_UN)
-    return False
-
-
 def engine_substitutions(case: Case, engine_name: str, params) -> list:
     """The substitutions ``engine_name`` makes for the case's features (``Engine.check``); raises
     :class:`engines.base.UnsupportedFeature` for a feature it lacks with no substitute the case
@@ -200,7 +160,7 @@ def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False
         with _RunLock(run_dir):
             return _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, analyze, params)
     if force and run_dir.exists():
-        if _lock_held(run_dir):
+        if lock_held(run_dir):
             raise EngineError(f"{run_dir} is being run by another process; wait for it or stop it before --force")
         if run_dir.is_symlink():        # a link to a run with the same engine input (orchestrator.twins)
             run_dir.unlink()

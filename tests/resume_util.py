@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from orchestrator.registry import get_engine
-from orchestrator.runner import read_summary
+from orchestrator.run_summary import read_summary
 
 
 def _engine_running_in(run_dir: Path) -> bool:

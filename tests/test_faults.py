@@ -230,7 +230,8 @@ def test_a_rerun_case_keeps_analyses_added_by_name_and_does_not_redo_its_own(tmp
     the record; an analysis the case now lists and the record lacks is run, beside the others."""
     from types import SimpleNamespace
     from orchestrator.integrity import run_record, verify_run
-    from orchestrator.runner import _reuse, read_summary
+    from orchestrator.run_summary import read_summary
+    from orchestrator.runner import _reuse
     run = synthetic_run(tmp_path / "run")
     (run / "summary.json").write_text(json.dumps({"status": "complete", "integrity": run_record(run)}))
     assert cli("analyze", run).returncode == 0                       # the case's own: displacements
@@ -312,7 +313,7 @@ def test_outputs_follow_the_umask(tmp_path):
 
 # --------------------------------------------------------------------------------- stale state
 def test_running_without_a_live_owner_is_marked_interrupted(tmp_path):
-    from orchestrator.runner import read_summary
+    from orchestrator.run_summary import read_summary
     run = tmp_path / "run"
     run.mkdir()
     (run / "summary.json").write_text(json.dumps({"status": "running", "pid": 999999}))

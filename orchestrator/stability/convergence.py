@@ -26,7 +26,8 @@ import numpy as np
 
 from ..case import CaseError, load_case
 from ..registry import get_scene
-from ..runner import read_summary, run_dir_for
+from ..run_summary import read_summary
+from ..runner import run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
 from .observables import SPREAD_SUFFIXES

@@ -23,7 +23,8 @@ from ..atomic import write_json, write_text
 from ..case import CaseError, allowed_fields, load_case
 from ..hints import unknown_name_hint
 from ..clock import run_engine_seconds
-from ..runner import read_summary, run_dir_for
+from ..run_summary import read_summary
+from ..runner import run_dir_for
 from .executor import get_executor, run_task
 from .observables import observables
 
