@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -317,7 +318,6 @@ def cmd_status(args) -> int:
     if df.empty:
         con.print(f"no runs under {', '.join(paths)} (a run directory holds a summary.json)")
         return 0
-    import os
     dirs = [os.path.abspath(d) for d in df.run_dir]
     root = os.path.commonpath([os.path.dirname(os.path.dirname(d)) for d in dirs])   # runs/<case>/<engine-hash>
     t = Table(title=f"Runs under {root}: engine time so far and left (CPU time on one rank, wall time on several)")
@@ -325,15 +325,20 @@ def cmd_status(args) -> int:
         t.add_column(col, justify="left" if col in ("run", "status") else "right", overflow="fold",
                      no_wrap=col != "run")
     colour = {"complete": "green", "running": "cyan", "interrupted": "yellow"}
+
+    def secs(x, complete):
+        return "-" if x != x or (x == 0 and complete) else fmt_s(x)
+
     for label, r in zip((os.path.relpath(d, root) for d in dirs), df.itertuples()):
-        def secs(x):
-            return "-" if x != x or (x == 0 and r.status == "complete") else fmt_s(x)
+        done = r.status == "complete"
         st = f"[{colour.get(r.status, 'red')}]{escape(r.status)}[/]"
+        # "~": the steps a scene that decides its step count as it runs is expected to take
+        of = f"{'~' if r.steps_expected != r.steps else ''}{int(r.steps_expected):,}" if r.steps_expected == r.steps_expected else ""
         step = ("-" if r.step != r.step or r.step is None else
-                f"{int(r.step):,}/{int(r.steps):,} ({100 * r.done:.0f} %)" if r.done == r.done else f"{int(r.step):,}")
+                f"{int(r.step):,}/{of} ({100 * r.done:.0f} %)" if r.done == r.done else f"{int(r.step):,}")
         t.add_row(escape(label), st, f"{r.n_particles:,}" if r.n_particles == r.n_particles and r.n_particles else "-",
-                  step, str(r.attempts), secs(r.engine_s), "-" if r.pace != r.pace else f"{r.pace:.0f}",
-                  secs(r.left_pace_s), secs(r.left_clock_s))
+                  step, str(r.attempts), secs(r.engine_s, done), "-" if r.pace != r.pace else f"{r.pace:.0f}",
+                  secs(r.left_pace_s, done), secs(r.left_clock_s, done))
     con.print(t)
     if (df.status == "interrupted").any():
         con.print("[yellow]an interrupted run resumes from its last restart point when the command that started it "

@@ -19,6 +19,12 @@ The time left comes two ways, neither exact (docs/validation.md, the clock):
   true figure longer;
 - ``left_clock_s``: the clock's estimate before the run times the share of the steps left
   (:mod:`orchestrator.clock`), which knows nothing of how this run has gone so far.
+
+A scene that decides its step count while it runs (a triaxial's stage 1 ends when the sample has
+converged) has a budget of steps it may take and fewer it is expected to take (what the engine's
+measured runs took, the steps the clock's estimate is for): the share done and the time left count
+the expected steps (``steps_expected``; the budget for a run recorded before session 30, whose
+summary does not say).
 """
 from __future__ import annotations
 
@@ -33,7 +39,7 @@ from .run_summary import read_summary
 __all__ = ["run_status", "status_table", "find_runs", "COLUMNS"]
 
 #: the columns of :func:`status_table`, in order (times in seconds of engine time)
-COLUMNS = ["run_dir", "case", "engine", "status", "n_particles", "step", "steps", "done", "attempts",
+COLUMNS = ["run_dir", "case", "engine", "status", "n_particles", "step", "steps", "steps_expected", "done", "attempts",
            "engine_s", "pace", "left_pace_s", "left_clock_s", "estimated_s"]
 
 
@@ -82,7 +88,9 @@ def run_status(run_dir) -> dict:
 
     - ``status``: ``complete``, ``running`` (a live process holds the run), ``interrupted`` (resume
       it by running the same command again), ``failed``, ``unstable``, ...;
-    - ``step``, ``steps``: the furthest step reached and the steps planned [-]; ``done`` their ratio;
+    - ``step``: the furthest step reached [-]; ``steps``: the run's step budget [-];
+      ``steps_expected``: the steps it is expected to take (the module docstring); ``done``: step
+      over steps_expected;
     - ``attempts``: how many times the engine was started on it;
     - ``engine_s``: the engine time spent so far [s], the steps a resume repeated included (a
       complete run's: :func:`orchestrator.clock.run_engine_seconds`, what an uninterrupted run would
@@ -97,6 +105,7 @@ def run_status(run_dir) -> dict:
     attempts = read_attempts(run_dir)
     nan = float("nan")
     steps = int(s.get("steps_run") or s.get("steps") or 0) or None
+    expected = int(s.get("steps_run") or s.get("estimated_steps") or steps or 0) or None
     status = s.get("status", "unknown")
     reached = max((a["last_step"] for a in attempts if isinstance(a.get("last_step"), int)), default=None)
     est = s.get("estimated_engine_time_s")
@@ -109,13 +118,13 @@ def run_status(run_dir) -> dict:
     else:
         times = [_attempt_seconds(a) for a in attempts]
         spent = sum(times) if times and None not in times else None
-        left = max(steps - reached, 0) if steps and reached is not None else None
+        left = max(expected - reached, 0) if expected and reached is not None else None
         left_pace = left / pace if left is not None and pace == pace else nan
-        left_clock = est * left / steps if left is not None else nan
+        left_clock = est * left / expected if left is not None else nan
     return {
         "run_dir": str(run_dir), "case": s.get("case", ""), "engine": s.get("engine", ""), "status": status,
-        "n_particles": s.get("n_particles"), "step": reached, "steps": steps,
-        "done": reached / steps if steps and reached is not None else nan,
+        "n_particles": s.get("n_particles"), "step": reached, "steps": steps, "steps_expected": expected,
+        "done": reached / expected if expected and reached is not None else nan,
         "attempts": len(attempts), "engine_s": nan if spent is None else float(spent), "pace": pace,
         "left_pace_s": left_pace, "left_clock_s": left_clock, "estimated_s": est,
     }

@@ -27,7 +27,7 @@ from .attempts import clear_attempts, read_attempts
 from .clock import record_speed
 from .case import Case, case_from_dict
 from .derive import derive
-from .sizing import estimate_wall_time
+from .sizing import estimate_wall_time, steps_expected
 from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
 from .params import Params, thaw
@@ -321,6 +321,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         "stability": {k: thaw(params.stability[k]) for k in ("limits", "fractions", "binding", "dt_max_safe", "ok",
                                                              "forced")} if params.stability is not None else None,
         "estimated_engine_time_s": estimate,
+        # the steps that estimate is for (a triaxial's stage 1: what the engine's measured runs took)
+        "estimated_steps": steps_expected(case, params, engine_name),
         # what the run-time model (orchestrator.clock) is fitted on
         "scene": case.scene.kind, "n_particles": int(params["scene"].get("n", len(params["scene"].get("ids", [])))),
         "workers": eng.workers(case),

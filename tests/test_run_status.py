@@ -47,6 +47,18 @@ def test_interrupted_run_steps_time_so_far_and_left(tmp_path):
     assert st["left_clock_s"] == pytest.approx(60.0 * 1500 / 3000)
 
 
+def test_a_stage_that_ends_when_converged_counts_the_expected_steps(tmp_path):
+    """A triaxial's budget (the most its stage 1 may take) is not what it is expected to take; the
+    share done and the time left count the steps the clock's estimate is for."""
+    d = write_run(tmp_path / "r", {"status": "running", "steps": 222720, "estimated_steps": 92160,
+                                    "estimated_engine_time_s": 258.0}, [attempt(0, 46080, 100.0, 101.0)])
+    st = run_status(d)
+    assert st["steps"] == 222720 and st["steps_expected"] == 92160 and st["done"] == pytest.approx(0.5)
+    assert st["left_clock_s"] == pytest.approx(129.0) and st["left_pace_s"] == pytest.approx(100.0)
+    out = orc("status", d)
+    assert "46,080/~92,160 (50 %)" in out.stdout, out.stdout
+
+
 def test_running_run_is_reported_running(tmp_path):
     d = write_run(tmp_path / "r", {"status": "running", "steps": 3000}, KILLED_TWICE[:1])
     with open(d / ".lock", "w") as fh:                 # a live owner, as the runner holds it
