@@ -27,7 +27,7 @@ from .attempts import clear_attempts, read_attempts
 from .clock import record_speed
 from .case import Case, case_from_dict
 from .derive import derive
-from .sizing import estimate_wall_time, steps_expected
+from .sizing import run_estimate
 from .frames import Frames
 from .initial_packing import apply_initial_packing, packing_digest, verify_written
 from .params import Params, thaw
@@ -312,7 +312,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
                  "it is reused")
             adopt_twin(run_dir, twin)
             return _reuse(case, run_dir, read_summary(run_dir), analyze)
-    estimate = estimate_wall_time(case, params, engine_name)
+    estimate, estimated_steps = run_estimate(case, params, engine_name)
     summary = {
         "case": case.name, "case_source": case.source, "engine": engine_name, "engine_version": version,
         "run_dir": str(run_dir), "deck": deck.name, "status": "rendered" if dry_run else "running",
@@ -322,7 +322,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
                                                              "forced")} if params.stability is not None else None,
         "estimated_engine_time_s": estimate,
         # the steps that estimate is for (a triaxial's stage 1: what the engine's measured runs took)
-        "estimated_steps": steps_expected(case, params, engine_name),
+        "estimated_steps": estimated_steps,
         # what the run-time model (orchestrator.clock) is fitted on
         "scene": case.scene.kind, "n_particles": int(params["scene"].get("n", len(params["scene"].get("ids", [])))),
         "workers": eng.workers(case),

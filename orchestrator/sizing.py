@@ -196,17 +196,15 @@ def check_fits(case, size: dict, force: bool = False) -> list[str]:
                                                              if hard else [])
 
 
-def steps_expected(case: Case, params: dict, engine_name: str) -> int:
-    """Steps the run is expected to take [-]: its budget, or for a scene that decides its step count
-    while it runs (triaxial stage 1) the steps the engine's measured runs took
-    (:func:`orchestrator.clock.planned_steps`): the step count :func:`estimate_wall_time` is for."""
+def run_estimate(case: Case, params: dict, engine_name: str) -> tuple[float, int]:
+    """(engine time [s], steps [-]) a run is estimated to take, from one read of the table: the
+    time of :func:`engine_time_estimate` and the steps it is for, the budget or, for a scene that
+    decides its step count while it runs (triaxial stage 1), the steps the engine's measured runs
+    took (:func:`orchestrator.clock.planned_steps`). What a run's summary.json records at its start."""
     key, steps, plan = clock_inputs(case, params["scene"], engine_name)
-    return int(planned_steps(load_table(), engine_name, key, steps, plan)[0])
-
-
-def estimate_wall_time(case: Case, params: dict, engine_name: str) -> float:
-    """Engine wall time [s] (:func:`engine_time_estimate` without its basis)."""
-    return engine_time_estimate(case, params, engine_name)[0]
+    table = load_table()
+    seconds = _engine_time(case, params, engine_name, key, steps, plan, table, None)[0]
+    return seconds, int(planned_steps(table, engine_name, key, steps, plan)[0])
 
 
 #: the basis :func:`engine_time_estimate` gives when no run of the engine was ever measured
