@@ -28,10 +28,10 @@ from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
 from ..base import Engine, EngineError, UnsupportedFeature, tail
-from ..lammps_dump import per_atom_arrays, read_binary_dump, truncate_binary_dump
+from ..lammps_dump import per_atom_arrays, read_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
-from ..liggghts.adapter import DumpOutput, cut_wall_series, dump_columns, write_data_file
-from ..liggghts.segments import deck_segments, dump_segments
+from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
+from ..liggghts.segments import cut_back_to_step, deck_segments, dump_segments
 from ..render import render_template
 from .numbers import lammps_numbers, seed_term_ratios, shear_cell_law, shear_cell_regions
 
@@ -231,15 +231,9 @@ class Lammps(Engine):
                 "candidates": [f"restart/{f.name}" for f in reversed(files)]}
 
     def prepare_resume(self, run_dir: Path, resume: dict):
-        """Cut every frame segment and wall series back to the restart step: the resumed run
-        writes a new segment and a new ``walls.<step>.txt`` from there (rows the killed run wrote
-        after the restart step would otherwise be read as well)."""
-        cols = Path(run_dir) / "dump" / "columns.json"
-        n = len(json.loads(cols.read_text())) if cols.exists() else None
-        for seg in dump_segments(run_dir):
-            if truncate_binary_dump(seg, n, resume["step"]) == 0:
-                seg.unlink()
-        cut_wall_series(run_dir, resume["step"])
+        """Cut every frame segment and the wall series back to the restart step
+        (:func:`~engines.liggghts.segments.cut_back_to_step`)."""
+        cut_back_to_step(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:

@@ -26,11 +26,11 @@ from orchestrator.particles_io import read_particle_table
 from orchestrator.registry import get_scene
 
 from ..base import Engine, EngineError, tail
-from ..lammps_dump import COLUMNS, per_atom_arrays, read_binary_dump, stress_tensors, truncate_binary_dump
+from ..lammps_dump import COLUMNS, per_atom_arrays, read_binary_dump, stress_tensors
 from ..render import render_template
 from . import triaxial
 from .numbers import liggghts_numbers, seed_term_ratios
-from .segments import deck_segments, dump_segments, wall_rows
+from .segments import cut_back_to_step, deck_segments, dump_segments, wall_rows
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
@@ -231,16 +231,9 @@ class Liggghts(Engine):
                 "candidates": [f"restart/{f.name}" for f in reversed(files)]}
 
     def prepare_resume(self, run_dir: Path, resume: dict):
-        """Cut every frame segment back to the restart step: the resumed run writes a new segment
-        from there."""
-        run_dir = Path(run_dir)
-        cols = run_dir / "dump" / "columns.json"
-        if cols.exists():
-            n = len(json.loads(cols.read_text()))
-            for seg in dump_segments(run_dir):
-                if truncate_binary_dump(seg, n, resume["step"]) == 0:
-                    seg.unlink()
-        cut_wall_series(run_dir, resume["step"])
+        """Cut every frame segment and the wall series back to the restart step
+        (:func:`~engines.liggghts.segments.cut_back_to_step`)."""
+        cut_back_to_step(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:
@@ -401,19 +394,3 @@ def read_contacts(path) -> dict | None:
     normal = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
     return {"i": a[:, 6].astype(np.int64), "j": a[:, 7].astype(np.int64), "point": a[:, 15:18],
             "normal": normal, "fn": a[:, 9:12], "ft": a[:, 12:15]}
-
-
-def cut_wall_series(run_dir: Path, step: int) -> None:
-    """Cut the wall series a deck writes with ``fix ave/time ... file walls.<start step>.txt`` back to
-    the rows of steps <= ``step`` (a resumed run writes its own file from there; rows after the
-    restart step would appear twice); a file begun after ``step`` is removed."""
-    for f in Path(run_dir).glob("walls.*.txt"):
-        start = f.name.split(".")[1]
-        if start.isdigit() and int(start) > step:
-            f.unlink()
-            continue
-        lines = f.read_text().splitlines(keepends=True)
-        keep = [ln for ln in lines if ln.startswith("#") or not ln.split() or int(float(ln.split()[0])) <= step]
-        if len(keep) != len(lines):
-            from orchestrator.atomic import write_text
-            write_text(f, "".join(keep))

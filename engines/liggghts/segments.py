@@ -3,9 +3,14 @@ then one segment ``dump/frames.<restart step>.bin`` per resume; the wall sampler
 ``walls.<n>.txt`` files."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
+
+from orchestrator.atomic import write_text
+
+from ..lammps_dump import truncate_binary_dump
 
 
 def dump_segments(run_dir) -> list[Path]:
@@ -49,3 +54,35 @@ def deck_segments(steps: int, restart_every: int, start: int = 0) -> list[dict]:
     return [{"start": a, "stop": b, "last": b == steps,
              "dump_file": "frames.bin" if a == 0 else f"frames.{a:012d}.bin"}
             for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def cut_back_to_step(run_dir, step: int) -> None:
+    """Cut a LIGGGHTS or LAMMPS run's files back to the restart ``step`` before it resumes: every
+    frame segment to its last snapshot at or before ``step`` (a segment left empty is removed) and
+    the wall series (:func:`cut_wall_series`). The resumed run writes a new segment and a new
+    ``walls.<step>.txt`` from there; rows the killed run wrote after the restart step would
+    otherwise be read twice. Without ``dump/columns.json`` no frame was written and there is
+    nothing to cut in the dumps."""
+    run_dir = Path(run_dir)
+    cols = run_dir / "dump" / "columns.json"
+    if cols.exists():
+        n = len(json.loads(cols.read_text()))
+        for seg in dump_segments(run_dir):
+            if truncate_binary_dump(seg, n, step) == 0:
+                seg.unlink()
+    cut_wall_series(run_dir, step)
+
+
+def cut_wall_series(run_dir, step: int) -> None:
+    """Cut the wall series a deck writes with ``fix ave/time ... file walls.<start step>.txt`` back to
+    the rows of steps <= ``step`` (a resumed run writes its own file from there; rows after the
+    restart step would appear twice); a file begun after ``step`` is removed."""
+    for f in Path(run_dir).glob("walls.*.txt"):
+        start = f.name.split(".")[1]
+        if start.isdigit() and int(start) > step:
+            f.unlink()
+            continue
+        lines = f.read_text().splitlines(keepends=True)
+        keep = [ln for ln in lines if ln.startswith("#") or not ln.split() or int(float(ln.split()[0])) <= step]
+        if len(keep) != len(lines):
+            write_text(f, "".join(keep))
