@@ -17,6 +17,7 @@ from engines.lammps_dump import dump_columns_in, read_binary_dump, scan_binary_d
 from engines.lammps.numbers import (lammps_numbers, restitution_damping, seed_gamma_n,
                                     tangential_damping_factor, viscoelastic_eta, wall_young)
 from engines.lammps_dump import read_dump
+from engines.liggghts.segments import cut_back_to_step, dump_segments, wall_rows
 from orchestrator.derive import effective_modulus, effective_shear_modulus
 
 
@@ -68,6 +69,26 @@ def test_reader_takes_a_step_written_twice_from_the_later_segment(tmp_path):
     (tmp_path / "frames.000000000005.bin").write_bytes(_snapshot(5, a + 2) + _snapshot(9, a + 3))
     snaps = list(read_binary_dump([tmp_path / "frames.bin", tmp_path / "frames.000000000005.bin"], 4))
     assert [s for s, _ in snaps] == [0, 5, 9] and snaps[1][1][0, 0] == 2
+
+
+def test_cut_back_to_step_leaves_only_what_the_restart_step_had_written(tmp_path):
+    """Before a LIGGGHTS or LAMMPS run resumes from its restart at step 5: frame snapshots after
+    step 5 are cut, a segment begun after it is removed, and the wall series keeps its header and
+    the rows of steps <= 5 (a file begun after step 5 is removed)."""
+    a = np.zeros((2, 4))
+    dump = tmp_path / "dump"
+    dump.mkdir()
+    (dump / "columns.json").write_text(json.dumps(["id", "x", "y", "z"]))
+    (dump / "frames.bin").write_bytes(_snapshot(0, a) + _snapshot(5, a + 1) + _snapshot(8, a + 2))
+    (dump / "frames.000000000007.bin").write_bytes(_snapshot(7, a + 3) + _snapshot(9, a + 4))
+    (tmp_path / "walls.0.txt").write_text("# step fz\n0 1.0\n3 2.0\n5 3.0\n6 4.0\n8 5.0\n")
+    (tmp_path / "walls.7.txt").write_text("# step fz\n7 6.0\n")
+    cut_back_to_step(tmp_path, 5)
+    assert dump_segments(tmp_path) == [dump / "frames.bin"]
+    assert [s for s, _ in read_binary_dump(dump / "frames.bin", 4)] == [0, 5]
+    assert (tmp_path / "walls.0.txt").read_text() == "# step fz\n0 1.0\n3 2.0\n5 3.0\n"
+    assert not (tmp_path / "walls.7.txt").exists()
+    np.testing.assert_array_equal(wall_rows(tmp_path), [[0, 1.0], [3, 2.0], [5, 3.0]])
 
 
 def test_reader_refuses_a_wrong_width_and_an_unknown_magic(tmp_path):
