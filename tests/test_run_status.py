@@ -16,6 +16,7 @@ import pytest
 
 import orchestrator
 from orchestrator.attempts import run_cost
+from orchestrator.cli import main
 from orchestrator.run_status import COLUMNS, run_status, status_table
 
 
@@ -111,14 +112,21 @@ def test_cli_prints_the_runs_and_writes_csv(tmp_path):
     assert pd.read_csv(tmp_path / "s.csv")["step"].tolist() == [1500]
 
 
-def test_cli_bad_and_empty_paths(tmp_path):
-    out = orc("status", tmp_path / "nowhere")
-    assert out.returncode == 2 and "nowhere" in out.stderr and "Traceback" not in out.stderr
+def test_cli_bad_and_empty_paths(tmp_path, capsys, monkeypatch):
+    """The command's own entry point in this process (the subprocess above proves the command)."""
+    def status(*args):
+        code = main(["status", *map(str, args)])
+        out = capsys.readouterr()
+        return code, out.out, out.err
+
+    code, _, err = status(tmp_path / "nowhere")
+    assert code == 2 and "nowhere" in err and "Traceback" not in err
     (tmp_path / "empty").mkdir()
-    out = orc("status", tmp_path / "empty")
-    assert out.returncode == 0 and "no runs under" in out.stdout
-    out = orc("status", cwd=tmp_path / "empty")      # no ./runs yet: said, not an error
-    assert out.returncode == 0 and "no runs here yet" in out.stdout
+    code, out, _ = status(tmp_path / "empty")
+    assert code == 0 and "no runs under" in out
+    monkeypatch.chdir(tmp_path / "empty")
+    code, out, _ = status()                              # no ./runs yet: said, not an error
+    assert code == 0 and "no runs here yet" in out
     (tmp_path / "case.yaml").write_text("name: x\n")
-    out = orc("status", tmp_path / "case.yaml")
-    assert out.returncode == 2 and "case.yaml" in out.stderr and "Traceback" not in out.stderr
+    code, _, err = status(tmp_path / "case.yaml")
+    assert code == 2 and "case.yaml" in err and "Traceback" not in err
