@@ -96,10 +96,10 @@ def test_table_finds_every_run_of_a_tree_once(tmp_path):
     assert orchestrator.status(tmp_path / "runs").equals(status_table(tmp_path / "runs"))   # the notebook name
 
 
-def orc(*args, cwd=None):
+def orc(*args):
     """The command in a 160-column terminal (an 80-column one folds the table's cells)."""
     return subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], capture_output=True,
-                          text=True, timeout=60, env={**os.environ, "COLUMNS": "160"}, cwd=cwd)
+                          text=True, timeout=60, env={**os.environ, "COLUMNS": "160"})
 
 
 def test_cli_prints_the_runs_and_writes_csv(tmp_path):
