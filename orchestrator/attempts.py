@@ -8,14 +8,19 @@ the run directory holds one entry per attempt, rewritten every :attr:`AttemptRec
 (5; atomically; a SIGKILL loses at most that much)::
 
     {"first_step": 101680, "last_step": 236160, "wall_s": 1933.0, "cpu_s": 1911.2, "ranks": 1,
-     "load": 2.9, "cores": 2, "done": false}
+     "load": 2.9, "cores": 2, "done": false,
+     "recent": {"steps": 15040, "wall_s": 601.2, "cpu_s": 598.7}}
 
 ``cpu_s`` is the CPU time (user + system) of the engine and its descendants, read with psutil
 while it runs (a rank that exited is counted in its parent's children times), and the ``os.wait4``
 figure once it is reaped. ``load`` is the machine's one-minute load average, averaged over the
 samples taken at each write (the attempt's own ranks included), beside the machine's ``cores``: a
 run whose ``load`` exceeds its ``cores`` shared the machine, and its wall time is longer than a
-quiet machine's (``benchmarks/bench_estimate.py`` marks it). A fresh start clears the file.
+quiet machine's (``benchmarks/bench_estimate.py`` marks it). ``recent`` holds the steps, wall and CPU
+time of the attempt's latest :attr:`AttemptRecord.WINDOW` seconds (10 min): the pace now, which
+``orchestrator status`` divides the steps left by (a run slows as a shear cell's sample densifies; a
+stretch that shared the machine or was paused with SIGSTOP weighs on it for one window, not for the
+rest of the attempt). A fresh start clears the file.
 
 :func:`run_cost` turns the record into the engine time an uninterrupted run would have taken: each
 attempt's time scaled by the share of its steps that were new (a resume repeats the steps since the
@@ -26,6 +31,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections import deque
 from pathlib import Path
 
 import psutil
@@ -80,18 +86,24 @@ class AttemptRecord:
     #: seconds between two writes of the record (ORCHESTRATOR_ATTEMPT_EVERY overrides it, e.g. for a
     #: test that kills a run after a few seconds)
     EVERY = float(os.environ.get("ORCHESTRATOR_ATTEMPT_EVERY", "5"))
+    #: seconds of wall time the ``recent`` pace spans (at least; the oldest sample kept is the
+    #: latest one this old)
+    WINDOW = 600.0
+    #: the wall clock [s] (a test steps a fake one)
+    clock = staticmethod(time.perf_counter)
 
     def __init__(self, run_dir, first_step: int | None, ranks: int = 1):
         """``first_step``: the step the attempt starts from (0 for a fresh start); None when the
         resume point does not say (YADE's checkpoint): the first step the engine reports, later by
         at most one progress interval."""
         self.path = Path(run_dir) / FILE
-        self.t0 = time.perf_counter()
+        self.t0 = self.clock()
         self.next = self.t0 + self.EVERY
         first = None if first_step is None else int(first_step)
         self.entry = {"first_step": first, "last_step": first, "wall_s": 0.0,
                       "cpu_s": None, "ranks": int(ranks), "load": None, "cores": os.cpu_count(), "done": False}
         self._load_sum, self._load_n = 0.0, 0
+        self._samples: deque = deque()      # (wall [s], step, cpu [s] or None) at each write
         self.earlier = read_attempts(run_dir)
         self._write()
 
@@ -112,7 +124,7 @@ class AttemptRecord:
         """Note the engine's current ``step`` and, every EVERY seconds, write the record with the
         wall time and the CPU time of process ``pid`` and its descendants so far."""
         self._note(step)
-        now = time.perf_counter()
+        now = self.clock()
         if not force and now < self.next:
             return
         self.next = now + self.EVERY
@@ -122,7 +134,22 @@ class AttemptRecord:
             cpu = process_tree_cpu_seconds(pid)
             if cpu is not None:
                 self.entry["cpu_s"] = cpu
+        self._note_recent()
         self._write()
+
+    def _note_recent(self) -> None:
+        """Keep the samples of the latest WINDOW seconds (and the one just before) and record the
+        steps, wall and CPU time between the oldest and this one as ``recent``."""
+        e = self.entry
+        if e["last_step"] is None:
+            return
+        self._samples.append((e["wall_s"], e["last_step"], e["cpu_s"]))
+        while len(self._samples) > 2 and self._samples[-1][0] - self._samples[1][0] >= self.WINDOW:
+            self._samples.popleft()
+        (w0, s0, c0), (w1, s1, c1) = self._samples[0], self._samples[-1]
+        if len(self._samples) > 1 and s1 > s0:
+            e["recent"] = {"steps": s1 - s0, "wall_s": round(w1 - w0, 3),
+                           "cpu_s": None if c0 is None or c1 is None else round(c1 - c0, 3)}
 
     def _sample_load(self) -> None:
         try:
@@ -136,7 +163,7 @@ class AttemptRecord:
         """The attempt ended at ``step`` with the engine's reaped CPU time ``cpu_s`` [s]; ``done``:
         the engine finished the run."""
         self._note(step)
-        self.entry["wall_s"] = time.perf_counter() - self.t0
+        self.entry["wall_s"] = self.clock() - self.t0
         if cpu_s is not None:
             self.entry["cpu_s"] = float(cpu_s)
         self.entry["done"] = bool(done)

@@ -13,8 +13,9 @@ A run found ``running`` that no live process holds is reported ``interrupted``
 
 The time left comes two ways, neither exact (docs/validation.md, the clock):
 
-- ``left_pace_s``: the steps left at the pace of the latest attempt (steps per engine second).
-  A later stage that costs more per step (a shear cell's shear stage after its compression, where
+- ``left_pace_s``: the steps left at the latest attempt's pace over its last 10 minutes (steps per
+  engine second; the attempt's ``recent`` record, :mod:`orchestrator.attempts`; the whole attempt's
+  pace for a record without one). A later stage that costs more per step (a shear cell's shear stage after its compression, where
   the grains are denser and touch more; a triaxial's loading after its drag-held stage 1) makes the
   true figure longer;
 - ``left_clock_s``: the clock's estimate before the run times the share of the steps left
@@ -75,8 +76,14 @@ def _attempt_seconds(a: dict) -> float | None:
 
 
 def _latest_pace(attempts: list[dict]) -> float:
-    """Steps per engine second [1/s] of the latest attempt that made progress; NaN without one."""
+    """Steps per engine second [1/s] of the latest attempt that made progress, over its last 10
+    minutes where recorded (its ``recent`` entry), else over the whole attempt; NaN without one."""
     for a in reversed(attempts):
+        recent = a.get("recent")
+        if isinstance(recent, dict) and isinstance(recent.get("steps"), int) and recent["steps"] > 0:
+            t = _attempt_seconds({**recent, "ranks": a.get("ranks")})
+            if t:
+                return recent["steps"] / t
         first, last, t = a.get("first_step"), a.get("last_step"), _attempt_seconds(a)
         if isinstance(first, int) and isinstance(last, int) and last > first and t:
             return (last - first) / t
@@ -95,7 +102,7 @@ def run_status(run_dir) -> dict:
     - ``engine_s``: the engine time spent so far [s], the steps a resume repeated included (a
       complete run's: :func:`orchestrator.clock.run_engine_seconds`, what an uninterrupted run would
       have taken);
-    - ``pace``: steps per engine second of the latest attempt [1/s];
+    - ``pace``: steps per engine second of the latest attempt, over its last 10 minutes [1/s];
     - ``left_pace_s``, ``left_clock_s``: the engine time left [s] at that pace and by the clock's
       estimate before the run (the module docstring); 0 for a complete run;
     - ``estimated_s``: the clock's estimate of the whole run before it started [s].

@@ -81,6 +81,28 @@ def test_the_record_follows_a_real_process(tmp_path, monkeypatch):
     assert oct(os.stat(tmp_path / "attempts.json").st_mode & 0o777) == oct(0o666 & ~_umask())
 
 
+def test_the_recent_pace_spans_the_latest_window(tmp_path, monkeypatch):
+    """A run that slows (a shear cell's sample densifying) or was paused: ``recent`` holds the steps
+    and times of the latest WINDOW seconds only, which ``orchestrator status`` paces the rest by."""
+    now = [0.0]
+    monkeypatch.setattr(AttemptRecord, "clock", staticmethod(lambda: now[0]))
+    monkeypatch.setattr(AttemptRecord, "EVERY", 10.0)
+    monkeypatch.setattr(AttemptRecord, "WINDOW", 100.0)
+    rec = AttemptRecord(tmp_path, 1000)
+    assert "recent" not in read_attempts(tmp_path)[0]
+    step = 1000
+    for t in range(10, 1001, 10):                   # 10 steps/s for 500 s, then 2 steps/s
+        now[0] = float(t)
+        step += 100 if t <= 500 else 20
+        rec.update(step)
+    (entry,) = read_attempts(tmp_path)
+    assert (entry["first_step"], entry["last_step"], entry["wall_s"]) == (1000, 7000, 1000.0)
+    assert entry["recent"]["wall_s"] == 100.0 and entry["recent"]["steps"] == 200   # 2 steps/s, not 6
+    assert entry["recent"]["cpu_s"] is None         # no process given: no CPU time
+    rec.close(7000, None, done=False)
+    assert read_attempts(tmp_path)[0]["recent"]["steps"] == 200
+
+
 def _umask() -> int:
     m = os.umask(0)
     os.umask(m)

@@ -69,6 +69,20 @@ def test_running_run_is_reported_running(tmp_path):
     assert math.isnan(st["left_clock_s"])              # no estimate recorded: not made up
 
 
+def test_the_time_left_follows_the_latest_ten_minutes(tmp_path):
+    """The attempt averaged 10 steps per CPU second, its last 10 minutes 2: the rest takes 5x the
+    whole attempt's pace; a record without ``recent`` (written before session 32) keeps the average."""
+    slowing = {**attempt(0, 6000, 600.0, 610.0), "recent": {"steps": 1200, "wall_s": 601.0, "cpu_s": 600.0}}
+    d = write_run(tmp_path / "r", {"status": "running", "steps": 10000}, [slowing])
+    st = run_status(d)
+    assert st["pace"] == pytest.approx(2.0) and st["left_pace_s"] == pytest.approx(2000.0)
+    threads = {**slowing, "ranks": 2}               # several ranks or threads: the wall clock
+    d2 = write_run(tmp_path / "r2", {"status": "running", "steps": 10000}, [threads])
+    assert run_status(d2)["pace"] == pytest.approx(1200 / 601.0)
+    d3 = write_run(tmp_path / "r3", {"status": "running", "steps": 10000}, [attempt(0, 6000, 600.0, 610.0)])
+    assert run_status(d3)["pace"] == pytest.approx(10.0)
+
+
 def test_several_ranks_are_timed_by_the_wall_clock(tmp_path):
     d = write_run(tmp_path / "r", {"status": "failed", "steps": 2000},
                   [attempt(0, 1000, 38.0, 20.0, ranks=2)])
