@@ -147,7 +147,7 @@ class AttemptRecord:
         while len(self._samples) > 2 and self._samples[-1][0] - self._samples[1][0] >= self.WINDOW:
             self._samples.popleft()
         (w0, s0, c0), (w1, s1, c1) = self._samples[0], self._samples[-1]
-        if len(self._samples) > 1 and s1 > s0:
+        if len(self._samples) > 1:          # 0 steps when the engine stalled: status then paces by the attempt
             e["recent"] = {"steps": s1 - s0, "wall_s": round(w1 - w0, 3),
                            "cpu_s": None if c0 is None or c1 is None else round(c1 - c0, 3)}
 

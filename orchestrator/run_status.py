@@ -15,9 +15,9 @@ The time left comes two ways, neither exact (docs/validation.md, the clock):
 
 - ``left_pace_s``: the steps left at the latest attempt's pace over its last 10 minutes (steps per
   engine second; the attempt's ``recent`` record, :mod:`orchestrator.attempts`; the whole attempt's
-  pace for a record without one). A later stage that costs more per step (a shear cell's shear stage after its compression, where
-  the grains are denser and touch more; a triaxial's loading after its drag-held stage 1) makes the
-  true figure longer;
+  pace for a record without one, or whose last 10 minutes made no step). A later stage that costs
+  more per step (a shear cell's shear stage after its compression, where the grains are denser and
+  touch more; a triaxial's loading after its drag-held stage 1) makes the true figure longer;
 - ``left_clock_s``: the clock's estimate before the run times the share of the steps left
   (:mod:`orchestrator.clock`), which knows nothing of how this run has gone so far.
 

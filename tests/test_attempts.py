@@ -99,8 +99,12 @@ def test_the_recent_pace_spans_the_latest_window(tmp_path, monkeypatch):
     assert (entry["first_step"], entry["last_step"], entry["wall_s"]) == (1000, 7000, 1000.0)
     assert entry["recent"]["wall_s"] == 100.0 and entry["recent"]["steps"] == 200   # 2 steps/s, not 6
     assert entry["recent"]["cpu_s"] is None         # no process given: no CPU time
+    for t in range(1010, 1201, 10):                 # stalled: the record says so, no stale pace
+        now[0] = float(t)
+        rec.update(step)
+    assert read_attempts(tmp_path)[0]["recent"]["steps"] == 0
     rec.close(7000, None, done=False)
-    assert read_attempts(tmp_path)[0]["recent"]["steps"] == 200
+    assert read_attempts(tmp_path)[0]["recent"] == {"steps": 0, "wall_s": 100.0, "cpu_s": None}
 
 
 def _umask() -> int:

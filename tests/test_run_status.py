@@ -81,6 +81,9 @@ def test_the_time_left_follows_the_latest_ten_minutes(tmp_path):
     assert run_status(d2)["pace"] == pytest.approx(1200 / 601.0)
     d3 = write_run(tmp_path / "r3", {"status": "running", "steps": 10000}, [attempt(0, 6000, 600.0, 610.0)])
     assert run_status(d3)["pace"] == pytest.approx(10.0)
+    stalled = {**slowing, "recent": {"steps": 0, "wall_s": 600.0, "cpu_s": 0.1}}
+    d4 = write_run(tmp_path / "r4", {"status": "running", "steps": 10000}, [stalled])
+    assert run_status(d4)["pace"] == pytest.approx(10.0)   # no step in 10 minutes: the attempt's pace
 
 
 def test_several_ranks_are_timed_by_the_wall_clock(tmp_path):
