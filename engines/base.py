@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from orchestrator.attempts import AttemptRecord
+from orchestrator.humanize import fmt_s
 from orchestrator.resources import templates_dir
 
 FEATURES = (
@@ -232,9 +233,12 @@ class Engine(ABC):
 
     # -- running ---------------------------------------------------------------------------
     def run(self, deck: Path, case, total_steps: int, log: Path, timeout: float,
-            progress: bool = True, env: dict | None = None, first_step: int = 0) -> RunResult:
+            progress: bool = True, env: dict | None = None, first_step: int = 0,
+            expected_steps: int | None = None) -> RunResult:
         """Run the engine on ``deck`` in its directory, streaming output into ``log``, with a
-        progress bar fed by the engine's step counter, a wall-clock ``timeout`` [s] and a kill.
+        progress bar fed by the engine's step counter (toward ``expected_steps`` where the scene
+        decides its length while it runs and fewer than ``total_steps`` are expected), a wall-clock
+        ``timeout`` [s] and a kill.
         The attempt's steps (from ``first_step``, the resume point) and engine time go into the run
         directory's ``attempts.json`` as it runs (:mod:`orchestrator.attempts`).
         Raises :class:`EngineError` with the log's last lines on failure."""
@@ -250,7 +254,7 @@ class Engine(ABC):
         with open(log, "ab") as logf:
             proc = subprocess.Popen(cmd, cwd=run_dir, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                     env=full_env, start_new_session=True, preexec_fn=_die_with_parent)
-            bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress)
+            bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress, expected=expected_steps)
             attempt = AttemptRecord(run_dir, first_step, self.workers(case))
             try:
                 sel = selectors.DefaultSelector()
@@ -386,19 +390,25 @@ class _Progress:
     #: of the machine, so the mean rate since the start under-estimates the rest
     RATE_WINDOW = 120.0
 
-    def __init__(self, label: str, total: int, enabled: bool = True):
+    def __init__(self, label: str, total: int, enabled: bool = True, expected: int | None = None):
         import sys
         self.p = None
         self.lines = False
         if not enabled or total <= 0:
             return
         self.label, self.total, self.t0 = label, total, time.perf_counter()
+        #: the steps the run is expected to take, where its scene decides its length while it runs
+        #: (a triaxial's stage 1 goes on until it converges: the budget allows every chunk, the
+        #: engine's measured runs took about half of it, orchestrator.clock.planned_steps); the
+        #: lines count toward it, and toward the budget once the run has gone past it
+        self.expected = int(expected) if expected and 0 < expected < total else None
         self.first = None                        # (time, step) of the first report: a resumed run starts late
         self.samples = []                        # (time, step) of the last reports, for the ETA
         self.next = self.t0 + self.EVERY
         if not sys.stderr.isatty():
             self.lines = True
-            print(f"{label}: started, {total} steps; a progress line every {self.EVERY:.0f} s", file=sys.stderr,
+            goal = f"{total:,} steps" + (f" at most, ~{self.expected:,} expected" if self.expected else "")
+            print(f"{label}: started, {goal}; a progress line every {self.EVERY:.0f} s", file=sys.stderr,
                   flush=True)
             return
         try:
@@ -407,13 +417,18 @@ class _Progress:
             self.p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                               TimeElapsedColumn(), TimeRemainingColumn(), transient=True)
             self.p.start()
-            self.task = self.p.add_task(label, total=total)
+            self.task = self.p.add_task(label, total=self.expected or total)
         except Exception:
             self.p = None
 
+    def goal(self, step: int) -> int:
+        """The step count the progress is measured against [-]: the expected steps until the run
+        passes them, then the budget."""
+        return self.expected if self.expected and step <= self.expected else self.total
+
     def update(self, step: int):
         if self.p is not None:
-            self.p.update(self.task, completed=step)
+            self.p.update(self.task, completed=step, total=self.goal(step))
         elif self.lines:
             import sys
             now = time.perf_counter()
@@ -428,9 +443,11 @@ class _Progress:
                         self.samples.pop(0)
                 t, s0 = self.samples[0] if self.samples else (now, step)
                 rate = (step - s0) / (now - t) if now > t and step > s0 else 0.0
-                eta = f", ETA {(self.total - step) / rate:.0f} s" if rate > 0 else ""
-                print(f"{self.label}: step {step}/{self.total} ({100 * step / self.total:.0f} %), "
-                      f"{now - self.t0:.0f} s{eta}", file=sys.stderr, flush=True)
+                goal = self.goal(step)
+                of = f"~{goal:,} expected (at most {self.total:,})" if goal != self.total else f"{goal:,}"
+                eta = f", ETA {fmt_s((goal - step) / rate)}" if rate > 0 else ""
+                print(f"{self.label}: step {step:,}/{of} ({100 * step / goal:.0f} %), "
+                      f"{fmt_s(now - self.t0)}{eta}", file=sys.stderr, flush=True)
 
     def close(self):
         if self.p is not None:

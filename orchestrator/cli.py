@@ -307,7 +307,7 @@ def cmd_status(args) -> int:
     from rich.table import Table
     from .atomic import write_text
     from .run_status import status_table
-    from .sizing import fmt_s
+    from .humanize import fmt_s
     con = console()
     paths = args.paths or ["runs"]
     if not args.paths and not Path("runs").is_dir():

@@ -14,6 +14,7 @@ import os
 import time
 
 from .clock import clock_key, estimate_engine_time, load_table, planned_steps, step_plan
+from .humanize import fmt_bytes, fmt_s
 from .registry import get_engine
 
 #: the orchestrator's packing and particle table [bytes per particle]
@@ -87,26 +88,6 @@ def estimate(case, params: dict, engine: str) -> dict:
             "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
             "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),
             "disk_bytes": int(frames_bytes), "engine_time_s": float(t_engine), "engine_time_basis": basis}
-
-
-def fmt_bytes(b: float) -> str:
-    for unit in ("B", "kB", "MB", "GB", "TB"):
-        if b < 1000 or unit == "TB":
-            return f"{b:.0f} {unit}" if unit == "B" else f"{b:.1f} {unit}"
-        b /= 1000
-    return f"{b:.1f} TB"  # pragma: no cover
-
-
-def fmt_s(seconds: float) -> str:
-    if seconds < 1:
-        return f"{seconds * 1000:.0f} ms"
-    if seconds < 120:
-        return f"{seconds:.1f} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.1f} min"
-    if seconds < 172800:
-        return f"{seconds / 3600:.1f} h"
-    return f"{seconds / 86400:.1f} days"
 
 
 def describe(size: dict) -> str:

@@ -1,22 +1,64 @@
-"""The off-terminal progress line's ETA follows the recent step rate, not the mean since the start."""
+"""The off-terminal progress line: its ETA follows the recent step rate, not the mean since the
+start, and a run whose scene decides its length while it runs counts toward the steps expected."""
 import re
 
 import engines.base as base
 
+#: "step 150,000/200,000 (75 %), 10.0 min, ETA 8.3 min" (or ".../~100,000 expected (at most 200,000) ...")
+LINE = re.compile(r"step ([\d,]+)/~?([\d,]+)(?: expected \(at most ([\d,]+)\))? \((\d+) %\), .*?"
+                  r"(?:, ETA ([\d.]+) (ms|s|min|h|days))?$")
+SECONDS = {"ms": 1e-3, "s": 1.0, "min": 60.0, "h": 3600.0, "days": 86400.0}
 
-def test_eta_uses_the_recent_rate(monkeypatch, capsys):
+
+def _lines(monkeypatch, capsys, rates, **progress):
+    """A :class:`engines.base._Progress` of ``progress`` on a fake clock, fed one report a second
+    at the step ``rates`` [steps/s] (one per second); the progress lines it printed, parsed:
+    (step, goal, budget or None, percent, ETA [s] or None)."""
     clock = [0.0]
     monkeypatch.setattr(base.time, "perf_counter", lambda: clock[0])
-    p = base._Progress("run", total=200_000)
+    p = base._Progress("run", **progress)
     assert p.lines                                   # pytest's stderr is not a terminal
-    # a fast first stage (1 000 steps/s for 100 s), then 100 steps/s
     step = 0
-    for t in range(0, 600):
+    for t, rate in enumerate(rates):
         clock[0] = float(t)
-        step += 1000 if t < 100 else 100
+        step += rate
         p.update(step)
-    last = capsys.readouterr().err.strip().splitlines()[-1]
-    m = re.search(r"step (\d+)/200000.*ETA (\d+) s", last)
-    remaining = (200_000 - int(m.group(1))) / 100    # at the current rate
-    eta = float(m.group(2))
-    assert abs(eta - remaining) / remaining < 0.05, last
+    out = []
+    for line in capsys.readouterr().err.strip().splitlines()[1:]:
+        m = LINE.search(line)
+        assert m, line
+        num = lambda g: int(g.replace(",", "")) if g else None
+        eta = float(m.group(5)) * SECONDS[m.group(6)] if m.group(5) else None
+        out.append((num(m.group(1)), num(m.group(2)), num(m.group(3)), int(m.group(4)), eta))
+    return out
+
+
+def test_eta_uses_the_recent_rate(monkeypatch, capsys):
+    # a fast first stage (1 000 steps/s for 100 s), then 100 steps/s
+    step, goal, budget, _, eta = _lines(monkeypatch, capsys, [1000] * 100 + [100] * 500, total=200_000)[-1]
+    assert goal == 200_000 and budget is None
+    remaining = (200_000 - step) / 100               # at the current rate
+    assert abs(eta - remaining) / remaining < 0.05, (step, eta)
+
+
+def test_a_run_counts_toward_the_steps_expected_then_the_budget(monkeypatch, capsys):
+    """A triaxial's budget allows every stage-1 chunk; its measured runs took about half: the lines
+    say the expected steps and the budget, count the percentage and the ETA toward the expected
+    steps, and toward the budget once the run has passed them."""
+    lines = _lines(monkeypatch, capsys, [500] * 300, total=200_000, expected=100_000)   # 150 000 steps
+    before = [l for l in lines if l[0] <= 100_000]
+    after = [l for l in lines if l[0] > 100_000]
+    assert before and after
+    step, goal, budget, percent, eta = before[-1]
+    assert (goal, budget) == (100_000, 200_000) and percent == round(100 * step / 100_000)
+    assert abs(eta - (100_000 - step) / 500) <= 0.05 * (100_000 - step) / 500 + 1
+    step, goal, budget, percent, eta = after[-1]
+    assert (goal, budget) == (200_000, None) and percent == round(100 * step / 200_000)
+    assert abs(eta - (200_000 - step) / 500) / ((200_000 - step) / 500) < 0.05
+
+
+def test_an_expected_count_at_the_budget_is_the_budget(capsys):
+    """A scene of fixed length: the expected steps are the budget, and the line says the budget only."""
+    base._Progress("run", total=200_000, expected=200_000)
+    first = capsys.readouterr().err
+    assert "200,000 steps;" in first and "expected" not in first
