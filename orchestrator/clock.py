@@ -81,6 +81,9 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
 #: parallel efficiency used until a run on several ranks/threads has been measured
 ASSUMED_PARALLEL_EFFICIENCY = 0.7
 
+#: the words an estimate's basis says an assumed parallel efficiency with (sizing prints that clause)
+ASSUMED_WORDS = "an assumed parallel efficiency of"
+
 #: an estimate for more than this many times the largest run its entry was fitted on says it is an
 #: extrapolation: there the fitted curve's form decides the figure (docs/validation.md, the clock: YADE's
 #: shear-cell entry has put its medium case at 5.1 h to 9.9 h by the runs it was fitted on)
@@ -120,6 +123,13 @@ class Throughput:
         26's new start-up term failed two rungs of a running ladder with "unexpected keyword"."""
         known = {f.name for f in fields(cls)}
         return cls(**{k: v for k, v in entry.items() if k in known})
+
+    @property
+    def efficiency_measured(self) -> bool:
+        """Whether :attr:`parallel_efficiency` was fitted from runs on several ranks or threads
+        (:func:`fit` says so in the note), not assumed: YADE's two OpenMP threads ran the 4 108-grain
+        shear cell 1.33-1.52x faster than one (docs/engines.md), where the assumed 0.7 says 1.7x."""
+        return "parallel efficiency from" in self.note
 
     def startup_time(self, n_particles: int) -> float:
         """Start-up and set-up [s] with ``n_particles``."""
@@ -496,6 +506,9 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         if tp.max_particles and n_particles > EXTRAPOLATION_NOTE * tp.max_particles:
             basis += (f", {n_particles / tp.max_particles:.1f}x the largest run fitted ({tp.max_particles:,} "
                       "particles): an extrapolation")
+        if ranks > 1 and not tp.efficiency_measured:
+            basis += (f", {ranks} ranks or threads at {ASSUMED_WORDS} {tp.parallel_efficiency:g} "
+                      "(no run of this entry on several measured)")
         return scale * tp.engine_time(n_particles, n_steps, ranks), basis + note
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))

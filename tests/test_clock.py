@@ -11,7 +11,7 @@ import pytest
 
 from orchestrator.clock import (RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
                                 refresh, step_plan)
-from orchestrator.sizing import busy_cores, busy_note
+from orchestrator.sizing import _basis_note, busy_cores, busy_note
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -596,3 +596,21 @@ def test_ratios_recorded_against_a_since_refitted_entry_are_left_out(tmp_path, m
     assert clock.record_speed(d) is None
     t_here, basis = clock.estimate_engine_time("liggghts", key, n, steps)
     assert t_here == pytest.approx(Throughput(**here).engine_time(n, steps)) and "machine" not in basis
+
+
+def test_an_estimate_on_several_ranks_says_when_their_efficiency_is_assumed():
+    """YADE's two OpenMP threads ran the 4 108-grain shear cell 1.33-1.52x faster than one
+    (docs/engines.md), where the assumed efficiency 0.7 says 1.7x: an estimate on several ranks or
+    threads from an entry no such run was fitted on says so beside the figure (the dry run's line),
+    and one whose efficiency runs measured does not."""
+    def run(n, ranks, loop):
+        return RunSample("yade", "shear_cell", n, 10_000, ranks, loop + 5.0, loop, f"r{n}-{ranks}")
+    single = fit([run(1000, 1, 30.0), run(4000, 1, 120.0)])
+    both = fit([run(1000, 1, 30.0), run(4000, 1, 120.0), run(4000, 2, 80.0)])
+    assert not single.efficiency_measured and both.efficiency_measured
+    assert both.parallel_efficiency == pytest.approx(0.5, rel=1e-6)        # 120 s on one, 80 s on two
+    for tp, ranks, said in ((single, 2, True), (single, 1, False), (both, 2, False)):
+        t, basis = estimate_engine_time("yade", "shear_cell", 4000, 10_000, ranks, table={"yade": {"shear_cell": tp}})
+        note = _basis_note(basis)
+        assert ("2 ranks or threads at an assumed parallel efficiency of 0.7" in note) is said, (ranks, note)
+        assert t == pytest.approx(tp.engine_time(4000, 10_000, ranks))
