@@ -183,10 +183,13 @@ def run_estimate(case: Case, params: dict, engine_name: str) -> tuple[float, int
     """(engine time [s], steps [-]) a run is estimated to take, from one read of the table: the
     time of :func:`engine_time_estimate` and the steps it is for, the budget or, for a scene that
     decides its step count while it runs (triaxial stage 1), the steps the engine's measured runs
-    took (:func:`orchestrator.clock.planned_steps`). What a run's summary.json records at its start."""
+    took (:func:`orchestrator.clock.planned_steps`). What a run's summary.json records at its start:
+    the figure the dry run prints (:func:`estimate`), this machine's speed factor included (passing
+    the table it read without ``machine_speed`` lost it from session 30 to 33: YADE's clump triaxial
+    recorded 10.7 h where its dry run said 7.5 h)."""
     key, steps, plan = clock_inputs(case, params["scene"], engine_name)
     table = load_table()
-    seconds = _engine_time(case, params, engine_name, key, steps, plan, table, None)[0]
+    seconds = _engine_time(case, params, engine_name, key, steps, plan, table, machine_speed=True)[0]
     return seconds, int(planned_steps(table, engine_name, key, steps, plan)[0])
 
 

@@ -614,3 +614,26 @@ def test_an_estimate_on_several_ranks_says_when_their_efficiency_is_assumed():
         note = _basis_note(basis)
         assert ("2 ranks or threads at an assumed parallel efficiency of 0.7" in note) is said, (ranks, note)
         assert t == pytest.approx(tp.engine_time(4000, 10_000, ranks))
+
+
+def test_a_runs_recorded_estimate_is_the_dry_runs_figure(tmp_path, monkeypatch):
+    """The estimate a run records at its start (summary.json: `orchestrator status`' "left: clock",
+    the report) is the figure its dry run printed, this machine's speed factor included: from
+    session 30 to 33 it was taken without the factor (YADE's clump triaxial recorded 10.7 h where
+    its dry run said 7.5 h, × 0.70 for this machine's speed)."""
+    import orchestrator.clock as clock
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    from orchestrator.sizing import clock_inputs, estimate, run_estimate
+    monkeypatch.setattr(clock, "machine_id", lambda: "a test machine x2")     # no entry was fitted on it
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))      # no user table
+    case = load_case("cases/triaxial_smoke.yaml")
+    params = derive(case)
+    key = clock_inputs(case, params["scene"], "yade")[0]
+    (tmp_path / "speed.json").write_text(json.dumps({"a test machine x2": {"yade": [
+        {"run": "r", "scene": key, "n": 300, "ratio": 0.5, "quiet": True}]}}))
+    dry = estimate(case, params, "yade")
+    assert "× 0.50 for this machine's speed" in dry["engine_time_basis"]
+    seconds, steps = run_estimate(case, params, "yade")
+    assert seconds == pytest.approx(dry["engine_time_s"]) and steps == dry["steps_expected"]
