@@ -528,8 +528,15 @@ def _fix_hint(typ: str, e: dict, loc: tuple, kind, got) -> str:
         return f"; {field} takes one value, not a {type(got).__name__}: write e.g. {field.split('.')[-1]}: " \
                f"{default if default is not None else '...'}"
     if typ.endswith(("_type", "_parsing")):
-        return f"; write {field} as a {typ.split('_')[0]}{', e.g. ' + repr(default) if default is not None else ''}"
+        words = _TYPE_WORDS.get(typ.split("_")[0], "a " + typ.split("_")[0])
+        shown = str(default).lower() if isinstance(default, bool) else repr(default)    # YAML's true/false
+        return f"; write {field} as {words}{', e.g. ' + shown if default is not None else ''}"
     return ""
+
+
+#: pydantic's type names as the fix says them ("write scene.isotropic.max_chunks as an integer")
+_TYPE_WORDS = {"int": "an integer", "float": "a number", "bool": "true or false", "string": "a string",
+               "list": "a list", "dict": "a mapping"}
 
 
 def load_case(path, overrides: dict | None = None, check_timestep: bool = True) -> Case:

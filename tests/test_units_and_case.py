@@ -149,3 +149,18 @@ def test_a_container_too_small_for_its_contents_is_refused(tmp_path, base, scene
         load_case(case)
     msg = str(exc.value)
     assert str(case) in msg and all(w in msg for w in words)
+
+
+@pytest.mark.parametrize("base, section, fix", [
+    ("triaxial_smoke.yaml", "scene: {isotropic: {max_chunks: zero}}",
+     "write scene.isotropic.max_chunks as an integer, e.g. 60"),
+    ("shear_cell_smoke.yaml", "output: {velocity: maybe}", "write output.velocity as true or false, e.g. true"),
+])
+def test_a_value_of_the_wrong_type_is_answered_in_the_case_files_words(tmp_path, base, section, fix):
+    """The fix names the type as a case file writes it: "an integer", YAML's true or false."""
+    from pathlib import Path
+    case = tmp_path / "wrong.yaml"
+    case.write_text(f"extends: {Path(__file__).parents[1] / 'cases' / base}\n{section}\n")
+    with pytest.raises(CaseError) as exc:
+        load_case(case)
+    assert str(case) in str(exc.value) and fix in str(exc.value), str(exc.value)
