@@ -127,9 +127,10 @@ class Throughput:
     @property
     def efficiency_measured(self) -> bool:
         """Whether :attr:`parallel_efficiency` was fitted from runs on several ranks or threads
-        (:func:`fit` says so in the note), not assumed: YADE's two OpenMP threads ran the 4 108-grain
-        shear cell 1.33-1.52x faster than one (docs/engines.md), where the assumed 0.7 says 1.7x."""
-        return "parallel efficiency from" in self.note
+        (:func:`fit` says so in the note) or set to another value than the assumed one (a user's
+        table), not assumed: YADE's two OpenMP threads ran the 4 108-grain shear cell 1.33-1.52x
+        faster than one (docs/engines.md), where the assumed 0.7 says 1.7x."""
+        return "parallel efficiency from" in self.note or self.parallel_efficiency != ASSUMED_PARALLEL_EFFICIENCY
 
     def startup_time(self, n_particles: int) -> float:
         """Start-up and set-up [s] with ``n_particles``."""

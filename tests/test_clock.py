@@ -608,6 +608,7 @@ def test_an_estimate_on_several_ranks_says_when_their_efficiency_is_assumed():
     single = fit([run(1000, 1, 30.0), run(4000, 1, 120.0)])
     both = fit([run(1000, 1, 30.0), run(4000, 1, 120.0), run(4000, 2, 80.0)])
     assert not single.efficiency_measured and both.efficiency_measured
+    assert Throughput(1.0, 0.0, 1e-7, parallel_efficiency=0.45).efficiency_measured     # a user's own figure
     assert both.parallel_efficiency == pytest.approx(0.5, rel=1e-6)        # 120 s on one, 80 s on two
     for tp, ranks, said in ((single, 2, True), (single, 1, False), (both, 2, False)):
         t, basis = estimate_engine_time("yade", "shear_cell", 4000, 10_000, ranks, table={"yade": {"shear_cell": tp}})
