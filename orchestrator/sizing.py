@@ -181,7 +181,7 @@ def check_fits(case, size: dict, force: bool = False) -> list[str]:
 
 def run_estimate(case: Case, params: dict, engine_name: str) -> tuple[float, int]:
     """(engine time [s], steps [-]) a run is estimated to take, from one read of the table: the
-    time of :func:`engine_time_estimate` and the steps it is for, the budget or, for a scene that
+    time of :func:`_engine_time` and the steps it is for, the budget or, for a scene that
     decides its step count while it runs (triaxial stage 1), the steps the engine's measured runs
     took (:func:`orchestrator.clock.planned_steps`). What a run's summary.json records at its start:
     the figure the dry run prints (:func:`estimate`), this machine's speed factor included (passing
@@ -193,19 +193,8 @@ def run_estimate(case: Case, params: dict, engine_name: str) -> tuple[float, int
     return seconds, int(planned_steps(table, engine_name, key, steps, plan)[0])
 
 
-#: the basis :func:`engine_time_estimate` gives when no run of the engine was ever measured
+#: the basis :func:`_engine_time` gives when no run of the engine was ever measured
 BARE_BASIS = "from the bare engine's throughput, no run of this engine measured: a lower bound, decks run slower"
-
-
-def engine_time_estimate(case: Case, params: dict, engine_name: str, table: dict | None = None,
-                         machine_speed: bool | None = None) -> tuple[float, str]:
-    """(engine wall time [s], basis) estimated from the derived step count and particle count with
-    the cost model the project fitted to its own runs (:mod:`orchestrator.clock`: start-up + steps
-    (a + b n) / S(workers) per engine and scene); an engine never measured falls back to the
-    adapter's bare throughput (:attr:`engines.base.Engine.throughput`), which underestimates deck
-    runs (the basis says so). ``table``: the throughput table (default :func:`orchestrator.clock.load_table`)."""
-    key, steps, plan = clock_inputs(case, params["scene"], engine_name)
-    return _engine_time(case, params, engine_name, key, steps, plan, table, machine_speed)
 
 
 def clock_inputs(case: Case, sc: dict, engine_name: str) -> tuple:
@@ -220,7 +209,13 @@ def clock_inputs(case: Case, sc: dict, engine_name: str) -> tuple:
 
 def _engine_time(case: Case, params: dict, engine_name: str, key: str, steps: int, plan, table: dict | None,
                  machine_speed: bool | None) -> tuple[float, str]:
-    """:func:`engine_time_estimate` from the run's :func:`clock_inputs`."""
+    """(engine wall time [s], basis) of a run of ``case`` on ``engine_name`` with its
+    :func:`clock_inputs`, from the cost model the project fitted to its own runs
+    (:func:`orchestrator.clock.estimate_engine_time`: start-up + steps (a + b n) / S(workers) per
+    engine and scene; ``table``: the throughput table, default :func:`orchestrator.clock.load_table`;
+    ``machine_speed``: scale a package entry by this machine's measured speed). An engine never
+    measured falls back to the adapter's bare throughput (:attr:`engines.base.Engine.throughput`),
+    which underestimates deck runs (the basis says so: :data:`BARE_BASIS`)."""
     eng = get_engine(engine_name)
     n = integrated_particles(params)
     t, basis = estimate_engine_time(engine_name, key, max(n, 1), steps, eng.workers(case),
