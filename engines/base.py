@@ -391,7 +391,6 @@ class _Progress:
     RATE_WINDOW = 120.0
 
     def __init__(self, label: str, total: int, enabled: bool = True, expected: int | None = None):
-        import sys
         self.p = None
         self.lines = False
         if not enabled or total <= 0:
@@ -430,7 +429,6 @@ class _Progress:
         if self.p is not None:
             self.p.update(self.task, completed=step, total=self.goal(step))
         elif self.lines:
-            import sys
             now = time.perf_counter()
             if self.first is None and step > 0:   # the first report (a resumed run starts late)
                 self.first = (now, step)
