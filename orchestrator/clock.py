@@ -69,12 +69,13 @@ import yaml
 
 from .atomic import write_text
 from .attempts import read_attempts, run_cost
+from .humanize import fmt_s
 
 from .resources import data_file
 
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "engine_seconds", "expected_steps", "step_plan",
            "samples_from_runs", "fit", "planned_steps",
-           "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY",
+           "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY", "SPREAD_WORDS",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
            "speed_ratio", "run_engine_seconds", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
 
@@ -83,6 +84,12 @@ ASSUMED_PARALLEL_EFFICIENCY = 0.7
 
 #: the words an estimate's basis says an assumed parallel efficiency with (sizing prints that clause)
 ASSUMED_WORDS = "an assumed parallel efficiency of"
+
+#: the words an estimate's basis gives the spread of its time with where the runs measured took
+#: different step counts (the packing decides a triaxial's stage 1; sizing prints that clause)
+SPREAD_WORDS = "as the runs measured took"
+#: a spread of step counts narrower than this ratio of most to fewest is not printed [-]
+SPREAD_NOTE = 1.2
 
 #: an estimate for more than this many times the largest run its entry was fitted on says it is an
 #: extrapolation: there the fitted curve's form decides the figure (docs/validation.md, the clock: YADE's
@@ -115,6 +122,10 @@ class Throughput:
     #: the largest particle count of the runs fitted (0: not recorded, entries before session 27);
     #: beyond it a power law with α > 1 continues linearly (:meth:`step_time`)
     max_particles: int = 0
+    #: [fewest, most] units the runs took [-] (None: fewer than two runs measured): the packing
+    #: decides them (YADE's triaxial smoke, seeds 1 and 2 of one case: 2.5 and 8.0 pressure-ramp
+    #: lengths, 194.6 and 357.8 s), so the estimate says what this spread makes of its time
+    units_range: tuple[float, float] | None = None
 
     @classmethod
     def from_dict(cls, entry: dict) -> "Throughput":
@@ -122,7 +133,10 @@ class Throughput:
         started before the table was refitted (a ladder of several hours) still reads it: session
         26's new start-up term failed two rungs of a running ladder with "unexpected keyword"."""
         known = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in entry.items() if k in known})
+        kw = {k: v for k, v in entry.items() if k in known}
+        if kw.get("units_range") is not None:          # a JSON list
+            kw["units_range"] = tuple(float(x) for x in kw["units_range"])
+        return cls(**kw)
 
     @property
     def efficiency_measured(self) -> bool:
@@ -510,12 +524,28 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         if ranks > 1 and not tp.efficiency_measured:
             basis += (f", {ranks} ranks or threads at {ASSUMED_WORDS} {tp.parallel_efficiency:g} "
                       "(no run of this entry on several measured)")
+        basis += _spread_clause(tp, plan, lead, n_particles, steps, ranks, scale)
         return scale * tp.engine_time(n_particles, n_steps, ranks), basis + note
     if scenes:     # the slowest per-particle rate of the engine's other scenes: an upper estimate
         tp = max(scenes.values(), key=lambda t: t.step_time(n_particles))
         return (scale * tp.engine_time(n_particles, steps, ranks),
                 f"no {scene} run measured on {engine}: slowest other scene{note}")
     return float("nan"), f"no throughput measured for {engine}"
+
+
+def _spread_clause(tp: Throughput, plan, lead, n_particles: int, budget: int, ranks: int, scale: float) -> str:
+    """The basis's clause for the time a run takes at the fewest and at the most units the entry's
+    runs took (:attr:`Throughput.units_range`), when they differ by more than :data:`SPREAD_NOTE`
+    ("" otherwise, or when the steps are another engine's, ``lead``): an estimate made before the
+    packing exists cannot know which end it will meet (YADE's triaxial smoke: 194.6 and 357.8 s
+    from one case file on two seeds, docs/validation.md)."""
+    if plan is None or lead is not None or not tp.units_range:
+        return ""
+    lo, hi = tp.units_range
+    if lo <= 0 or hi < SPREAD_NOTE * lo:
+        return ""
+    t_lo, t_hi = (scale * tp.engine_time(n_particles, min(int(budget), plan.steps(u)), ranks) for u in (lo, hi))
+    return f", {fmt_s(t_lo)} to {fmt_s(t_hi)} {SPREAD_WORDS} {lo:.1f} to {hi:.1f} {plan.what}"
 
 
 def engine_seconds(summary: dict) -> float | None:
@@ -801,13 +831,19 @@ def fit(samples: list[RunSample]) -> Throughput:
     units = [s.units for s in samples if s.units is not None]
     med_units = float(np.median(units)) if units else None
     if units:
-        note += f"; {med_units:g} units (median of {len(units)})"
+        note += f"; {med_units:g} units (median of {len(units)}" + (f", {min(units):g}-{max(units):g})" if len(units) > 1 else ")")
     if startup_n > 0:
         note += f"; start-up {startup:.3g} s + {startup_n:.3g} s per particle"
     if alpha > 1:
         note += f"; linear beyond {int(ns.max())} particles"
     return Throughput(startup, float(a), float(b), eff, len(samples), note, med_units, alpha,
-                      startup_per_particle_s=startup_n, max_particles=int(ns.max()))
+                      startup_per_particle_s=startup_n, max_particles=int(ns.max()), units_range=units_range(units))
+
+
+def units_range(units) -> tuple[float, float] | None:
+    """(fewest, most) units [-] of two runs or more, else None (:attr:`Throughput.units_range`)."""
+    units = [float(u) for u in units if u is not None]
+    return (min(units), max(units)) if len(units) >= 2 else None
 
 
 def _nonnegative_line(ns, y) -> tuple[float, float]:
@@ -869,8 +905,10 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False, add: bool 
             continue
         med = float(np.median(units))
         entry["units"] = med
-        entry["note"] = (re.sub(r"; [\d.e+-]+ units \(median of \d+\)", "", entry.get("note", ""))
-                         + f"; {med:g} units (median of {len(units)}, steps refreshed alone)")
+        entry["units_range"] = units_range(units)
+        span = f", {min(units):g}-{max(units):g}" if len(units) > 1 else ""
+        entry["note"] = (re.sub(r"; [\d.e+-]+ units \(median of \d+[^)]*\)", "", entry.get("note", ""))
+                         + f"; {med:g} units (median of {len(units)}{span}, steps refreshed alone)")
         fitted.setdefault(eng, {})[sc] = Throughput.from_dict(entry)
         entries[eng, sc] = entry             # its costs and the runs it keeps unchanged
     for (eng, sc), entry in entries.items():

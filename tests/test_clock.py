@@ -11,7 +11,8 @@ import pytest
 
 from orchestrator.clock import (RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
                                 refresh, step_plan)
-from orchestrator.sizing import _basis_note, busy_cores, busy_note
+from orchestrator.humanize import fmt_s
+from orchestrator.sizing import _basis_note, busy_cores, busy_note, describe, estimate
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -264,6 +265,44 @@ def test_triaxial_estimate_takes_the_chunks_measured_runs_took(tmp_path, monkeyp
     assert size["steps_expected"] == plan.fixed + 12 * plan.unit
     assert size["engine_time_s"] == pytest.approx(fitted.engine_time(300, size["steps_expected"]))
     assert size["engine_time_s"] < 0.7 * fitted.engine_time(300, size["steps"])
+
+
+def test_an_estimate_says_the_spread_of_the_steps_its_runs_took(tmp_path, monkeypatch):
+    """Where the packing decides how long stage 1 takes (YADE's triaxial smoke on seeds 1 and 2 of
+    one case: 2.5 and 8.0 pressure-ramp lengths, 194.6 and 357.8 s, docs/validation.md), one figure
+    cannot hold both: the dry run prints the time at the fewest and at the most units the entry's
+    runs took beside the median's; with one run, or runs that agree, it prints none. The same
+    range for a steps-only refresh, and a table written before the range existed still reads."""
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    runs = tmp_path / "runs"
+    for name, k in (("a", 3), ("b", 5), ("c", 12)):
+        plan, _ = _triaxial_run(runs, name, k)
+    table = tmp_path / "throughput.json"
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(table))
+    fitted = refresh([runs], table)["yade"]["triaxial"]
+    lo, hi = (plan.units_of(plan.fixed + k * plan.unit) for k in (3, 12))
+    assert fitted.units_range == pytest.approx((lo, hi))
+    assert load_table()["yade"]["triaxial"].units_range == pytest.approx((lo, hi))   # JSON list read back
+    case = load_case("cases/triaxial_smoke.yaml")
+    size = estimate(case, derive(case), "yade")
+    t_lo, t_hi = (fitted.engine_time(300, plan.fixed + k * plan.unit) for k in (3, 12))
+    assert t_lo < size["engine_time_s"] < t_hi
+    line = describe(size)
+    assert (f"{fmt_s(t_lo)} to {fmt_s(t_hi)} as the runs measured took {lo:.1f} to {hi:.1f} "
+            "pressure-ramp lengths in stage 1") in line, line
+    # runs that agree within SPREAD_NOTE, or one run: no spread printed
+    for keep in (("a",), ("a", "b", "c")):
+        entry = asdict(fitted) | {"units_range": [lo, lo * 1.1] if len(keep) == 3 else None}
+        table.write_text(json.dumps({"yade": {"triaxial": entry}}))
+        assert "as the runs measured took" not in describe(estimate(case, derive(case), "yade"))
+    # a steps-only refresh records the range too; an entry without the field (older tables) reads
+    old = Throughput(2.0, 1e-3, 5e-6, 0.7, 9, "3 sizes; 12 units (median of 9, steps refreshed alone)", 12.0)
+    row = {k: v for k, v in asdict(old).items() if k != "units_range"}
+    table.write_text(json.dumps({"yade": {"triaxial": row}}))
+    assert load_table()["yade"]["triaxial"].units_range is None
+    new = refresh([runs], table, steps_only=True)["yade"]["triaxial"]
+    assert new.units_range == pytest.approx((lo, hi)) and new.note.count("units") == 1
 
 
 def test_steps_only_refresh_keeps_the_costs_per_step(tmp_path, monkeypatch):

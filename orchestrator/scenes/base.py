@@ -72,6 +72,8 @@ class StepPlan:
     max_units: int
     #: steps per learned unit (the variable part's physical time scale) [steps]; 0: the chunk ``unit``
     scale: int = 0
+    #: what a unit is, as an estimate names it (e.g. "pressure-ramp lengths of stage 1")
+    what: str = "units"
 
     @property
     def _per_unit(self) -> int:

@@ -549,7 +549,7 @@ def step_plan(scene_params) -> base.StepPlan:
     ramp_chunks = -(-int(iso.get("ramp_steps") or 0) // chunk)
     return base.StepPlan(fixed=int(iso["drag_ramp_steps"]) + int(scene_params["shear_steps"]),
                          unit=chunk, max_units=int(iso["max_chunks"]) + ramp_chunks,
-                         scale=int(iso.get("ramp_steps") or 0))
+                         scale=int(iso.get("ramp_steps") or 0), what="pressure-ramp lengths in stage 1")
 
 
 def stability_inputs(case, params) -> StabilityInputs:
