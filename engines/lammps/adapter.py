@@ -31,7 +31,7 @@ from ..base import Engine, EngineError, UnsupportedFeature, tail
 from ..lammps_dump import per_atom_arrays, read_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
 from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
-from ..liggghts.segments import cut_back_to_step, deck_segments, dump_segments
+from ..liggghts.segments import cut_back_to_step, deck_segments, dump_segments, loop_seconds, restart_resume_state
 from ..render import render_template
 from .numbers import lammps_numbers, seed_term_ratios, shear_cell_law, shear_cell_regions
 
@@ -219,16 +219,11 @@ class Lammps(Engine):
 
     def loop_time(self, log: Path) -> float:
         """Seconds LAMMPS spent in its time loop (sum of its 'Loop time of' lines)."""
-        text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
-        return sum(float(x) for x in re.findall(r"Loop time of ([0-9.eE+-]+)", text))
+        return loop_seconds(log)
 
     # -- resume -----------------------------------------------------------------------------
     def resume_state(self, run_dir: Path):
-        files = sorted((Path(run_dir) / "restart").glob("state.*.restart"), key=lambda p: int(p.name.split(".")[1]))
-        if not files:
-            return None
-        return {"restart_file": f"restart/{files[-1].name}", "step": int(files[-1].name.split(".")[1]),
-                "candidates": [f"restart/{f.name}" for f in reversed(files)]}
+        return restart_resume_state(run_dir)
 
     def prepare_resume(self, run_dir: Path, resume: dict):
         """Cut every frame segment and the wall series back to the restart step

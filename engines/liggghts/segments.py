@@ -1,9 +1,11 @@
-"""The frame dumps of a LIGGGHTS run as the orchestrator's decks write them: ``dump/frames.bin``,
-then one segment ``dump/frames.<restart step>.bin`` per resume; the wall sampler's
-``walls.<n>.txt`` files."""
+"""The files of a LIGGGHTS or LAMMPS run as the orchestrator's decks write them: the frame dumps
+``dump/frames.bin``, then one segment ``dump/frames.<restart step>.bin`` per resume; the wall
+sampler's ``walls.<n>.txt`` files; the restart files ``restart/state.<step>.restart``; the log's
+``Loop time of`` lines."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,24 @@ def dump_segments(run_dir) -> list[Path]:
     segs = sorted(d.glob("frames.*.bin"), key=lambda p: int(p.name.split(".")[1]))
     first = d / "frames.bin"
     return ([first] if first.exists() else []) + segs
+
+
+def restart_resume_state(run_dir) -> dict | None:
+    """Where a killed run resumes (:meth:`engines.base.Engine.resume_state`): the newest
+    ``restart/state.<step>.restart`` file, its step, and every restart file newest first (the
+    candidates, should the newest be damaged); None without one."""
+    files = sorted((Path(run_dir) / "restart").glob("state.*.restart"), key=lambda p: int(p.name.split(".")[1]))
+    if not files:
+        return None
+    return {"restart_file": f"restart/{files[-1].name}", "step": int(files[-1].name.split(".")[1]),
+            "candidates": [f"restart/{f.name}" for f in reversed(files)]}
+
+
+def loop_seconds(log) -> float:
+    """Seconds the engine spent in its time loops [s]: the sum of the log's ``Loop time of`` lines
+    (0 without a log)."""
+    text = Path(log).read_text(errors="replace") if Path(log).exists() else ""
+    return sum(float(x) for x in re.findall(r"Loop time of ([0-9.eE+-]+)", text))
 
 
 def wall_rows(run_dir) -> np.ndarray | None:
