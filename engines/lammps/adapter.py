@@ -31,7 +31,7 @@ from ..base import Engine, EngineError, UnsupportedFeature, tail
 from ..lammps_dump import per_atom_arrays, read_binary_dump
 # the same dump family, data file and wall-sampler files as LIGGGHTS' decks
 from ..liggghts.adapter import DumpOutput, dump_columns, write_data_file
-from ..liggghts.segments import cut_back_to_step, deck_segments, dump_segments, loop_seconds, restart_resume_state
+from ..liggghts.segments import RestartFiles, deck_segments, dump_segments
 from ..render import render_template
 from .numbers import lammps_numbers, seed_term_ratios, shear_cell_law, shear_cell_regions
 
@@ -50,7 +50,7 @@ def find_lmp() -> str | None:
     return shutil.which("lmp")
 
 
-class Lammps(Engine):
+class Lammps(RestartFiles, Engine):
     coulomb_limit_on = "spring + dashpot"   # GranSubModTangentialMindlin: |F_spring + F_dashpot| <= μF_n
     name = "lammps"
     executable = "lmp"
@@ -216,19 +216,6 @@ class Lammps(Engine):
                             break
                 msg += f"{where}{m.group(2)}\n"
         return msg + tail(log, 12)
-
-    def loop_time(self, log: Path) -> float:
-        """Seconds LAMMPS spent in its time loop (sum of its 'Loop time of' lines)."""
-        return loop_seconds(log)
-
-    # -- resume -----------------------------------------------------------------------------
-    def resume_state(self, run_dir: Path):
-        return restart_resume_state(run_dir)
-
-    def prepare_resume(self, run_dir: Path, resume: dict):
-        """Cut every frame segment and the wall series back to the restart step
-        (:func:`~engines.liggghts.segments.cut_back_to_step`)."""
-        cut_back_to_step(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:

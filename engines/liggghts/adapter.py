@@ -30,8 +30,7 @@ from ..lammps_dump import COLUMNS, per_atom_arrays, read_binary_dump, stress_ten
 from ..render import render_template
 from . import triaxial
 from .numbers import liggghts_numbers, seed_term_ratios
-from .segments import (cut_back_to_step, deck_segments, dump_segments, loop_seconds, restart_resume_state,
-                       wall_rows)
+from .segments import RestartFiles, deck_segments, dump_segments, wall_rows
 
 _THERMO = re.compile(rb"^\s*(\d+)\s+\d+\s+[-+0-9.eE]+(\s|$)")
 
@@ -46,7 +45,7 @@ def openmpi_launcher() -> str:
             return path
     return "mpirun"
 
-class Liggghts(Engine):
+class Liggghts(RestartFiles, Engine):
     name = "liggghts"
     executable = "liggghts"
     throughput = 6e6        # ENGINES.md: 2000 dense Hertz spheres on one core of this machine
@@ -216,19 +215,6 @@ class Liggghts(Engine):
                         msg += f"on {deck_path.name} line {deck.index(e) + 1}: {e}\n"
                         break
         return msg + tail(log, 12)
-
-    def loop_time(self, log: Path) -> float:
-        """Seconds LIGGGHTS spent in its time loop (sum of its 'Loop time of' lines)."""
-        return loop_seconds(log)
-
-    # -- resume -----------------------------------------------------------------------------
-    def resume_state(self, run_dir: Path):
-        return restart_resume_state(run_dir)
-
-    def prepare_resume(self, run_dir: Path, resume: dict):
-        """Cut every frame segment and the wall series back to the restart step
-        (:func:`~engines.liggghts.segments.cut_back_to_step`)."""
-        cut_back_to_step(run_dir, resume["step"])
 
     # -- parse ------------------------------------------------------------------------------
     def parse(self, case, params, run_dir: Path, meta: dict) -> Path:

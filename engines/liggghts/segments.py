@@ -42,6 +42,25 @@ def loop_seconds(log) -> float:
     return sum(float(x) for x in re.findall(r"Loop time of ([0-9.eE+-]+)", text))
 
 
+class RestartFiles:
+    """The run-file methods of an :class:`engines.base.Engine` whose decks write LAMMPS' restart
+    files and log (LIGGGHTS and LAMMPS): the loop time from the log, where a killed run resumes,
+    and the frames and wall series cut back to that step before it does."""
+
+    def loop_time(self, log: Path) -> float:
+        """Seconds the engine spent in its time loop [s] (:func:`loop_seconds`)."""
+        return loop_seconds(log)
+
+    def resume_state(self, run_dir: Path):
+        """:func:`restart_resume_state`."""
+        return restart_resume_state(run_dir)
+
+    def prepare_resume(self, run_dir: Path, resume: dict):
+        """Cut every frame segment and the wall series back to the restart step
+        (:func:`cut_back_to_step`)."""
+        cut_back_to_step(run_dir, resume["step"])
+
+
 def wall_rows(run_dir) -> np.ndarray | None:
     """Rows of the deck's wall sampler (``fix ave/time`` into ``walls.<n>.txt``, one file per
     run segment), files in numeric order, or None when there are none."""
