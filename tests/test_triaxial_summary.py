@@ -2,9 +2,16 @@
 taken on running means (the same window as the smoothed σ3 stray), the instantaneous one is kept."""
 from __future__ import annotations
 
+import json
+import shutil
+
 import numpy as np
 import pytest
 
+from orchestrator.case import load_case
+from orchestrator.clock import step_plan
+from orchestrator.compare.report import run_checks
+from orchestrator.derive import derive
 from orchestrator.scenes.triaxial import peak_stress_ratio, running_mean, smoothing_rows, solid_fraction_profile
 
 
@@ -146,3 +153,27 @@ def test_solid_fraction_profile_shows_a_crust_round_a_looser_core():
     core = (np.hypot(pos[:, 0], pos[:, 1]) < 12 * r) & (np.rint((pos.sum(axis=1) - 1) / 2).astype(int) % 2 == 0)
     _, crust = solid_fraction_profile(pos[~core], np.full(int((~core).sum()), r), 0.0, H, d50, rings=5)
     assert np.allclose(crust[:2] / full[:2], 0.5, atol=0.03) and np.allclose(crust[3:], full[3:]), crust
+
+
+def test_the_report_checks_a_triaxials_steps_against_its_plan_not_its_budget(tmp_path):
+    """A triaxial ends stage 1 when it converges, so it takes fewer steps than its budget: the run
+    report's check reads the plan (the fixed part and whole chunks; YADE's last step may be one
+    past a chunk's end) and passes such a run, where it used to say FAIL for every triaxial that
+    converged early (88 320 of 222 720 steps, LIGGGHTS smoke); a run that stopped inside a chunk,
+    and a fixed-length scene short of its steps, still fail."""
+    params = derive(load_case("cases/triaxial_smoke.yaml")).to_dict()
+    plan = step_plan("triaxial", params["scene"])
+    (tmp_path / "params.json").write_text(json.dumps(params, default=str))
+    shutil.copy("cases/triaxial_smoke.yaml", tmp_path / "case.yaml")
+    budget = params["scene"]["total_steps"]
+
+    def status(steps_run, planned=budget):
+        rows = run_checks(tmp_path, None, {"steps": planned, "steps_run": steps_run, "status": "complete"})
+        return rows[rows.check.str.startswith("steps run")].status.item()
+    for chunks, extra in ((8, 0), (5, 1), (plan.max_units, 0)):
+        assert status(plan.fixed + chunks * plan.unit + extra) == "ok"
+    assert status(plan.fixed + 5 * plan.unit + plan.unit // 2) == "FAIL"       # stopped inside a chunk
+    assert status(plan.fixed - plan.unit) == "FAIL"                             # before its fixed part
+    assert status(budget) == "ok"
+    (tmp_path / "case.yaml").write_text("scene: {kind: shear_cell}\n")           # a fixed step count
+    assert status(plan.fixed + 8 * plan.unit) == "FAIL"
