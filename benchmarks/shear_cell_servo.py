@@ -10,7 +10,8 @@
 ``gains``: the loop gain G = v_max kp γ_w/F_c of the servo against the dashpots of the grains it
 pushes (scenes/shear_cell.py ``servo_dashpot_gain``; plane shear: scenes/plane_shear.py), at the
 speed the compression inertial number gives and at the speed derive() uses (capped at G = 0.7).
-``series``: works on a running run (it reads walls.*.txt): the step the piston arrives (force first
+``series``: on a parsed run of any engine (frames.h5's wall series), and on a LIGGGHTS or LAMMPS run
+still going (its walls.*.txt): the step the piston arrives (force first
 above 0.98 of the target), the mean and std of F/F_target over the last 10 000 steps of compression
 that were written, and over the shear stage. ``probe``: a LIGGGHTS run directory with its restart
 files; the deck's segment that starts at STEP, run for 400 steps on one rank with the piston's
@@ -31,6 +32,7 @@ import numpy as np
 from engines.liggghts.segments import wall_rows
 from orchestrator.case import load_case
 from orchestrator.derive import derive
+from orchestrator.frames import Frames
 from orchestrator.scenes import plane_shear, shear_cell
 
 REPO = Path(__file__).resolve().parents[1]
@@ -57,13 +59,27 @@ def gains() -> None:
               f"{mod.servo_dashpot_gain(case, sv['v_max'], sv['kp']):.2f} | {fw} |")
 
 
+def piston_force(run: Path, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, the lower piston's axial force [N]) of a run: from frames.h5's wall series once the
+    run is parsed (any engine), else from the LIGGGHTS or LAMMPS deck's sampler files of a run
+    still going (the adapter's reader, every segment's file)."""
+    if (run / "frames.h5").is_file():
+        w = Frames(run / "frames.h5").wall("lower_piston")
+        return np.rint(w["time"].to_numpy() / dt), w["force_z"].to_numpy()
+    w = wall_rows(run)
+    if w is None:
+        raise SystemExit(f"{run}: no frames.h5 and no walls.*.txt: no piston series to read")
+    w = w[np.argsort(w[:, 0], kind="stable")]
+    return w[:, 0], w[:, 4]
+
+
 def series(run: Path) -> None:
-    sc = json.loads((run / "params.json").read_text())["scene"]
+    p = json.loads((run / "params.json").read_text())
+    sc = p["scene"]
     Ft = sc["servo"]["target_force"]
     a, b = sc["stages"]["compress"]
-    w = wall_rows(run)           # the adapter's reader of the wall series (every segment's file)
-    w = w[np.argsort(w[:, 0], kind="stable")]
-    step, ratio = w[:, 0], np.abs(w[:, 4]) / Ft
+    step, force = piston_force(run, p["dt"])
+    ratio = np.abs(force) / Ft
     print(f"{run.name}: compression steps {a}-{b}, wall series to step {int(step[-1])}")
     arrived = np.flatnonzero((step > a) & (ratio > 0.98))
     if arrived.size:
