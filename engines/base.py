@@ -127,9 +127,16 @@ class Engine(ABC):
     #: copies of all frames the parse holds in memory at once (frames x particles x columns doubles)
     parse_copies: int = 1
 
+    #: the ``engine_options`` field that sets :meth:`workers` ("mpi_ranks" for an MPI engine)
+    workers_field: str = "threads"
+    #: whether every worker is a process of its own holding :attr:`base_bytes` (MPI ranks), rather
+    #: than a thread of one process (orchestrator.sizing counts the memory so)
+    workers_are_processes: bool = False
+
     def workers(self, case) -> int:
-        """Parallel workers a run of ``case`` uses (threads by default)."""
-        return case.engine_options.threads
+        """Parallel workers a run of ``case`` uses: its ``engine_options`` field
+        :attr:`workers_field` (threads by default)."""
+        return int(getattr(case.engine_options, self.workers_field))
 
     def complete_resume(self, case, run_dir: Path, resume: dict | None) -> dict | None:
         """Check and complete the resume point :meth:`resume_state` found for the case's scene

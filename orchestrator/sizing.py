@@ -3,7 +3,9 @@ from the derived parameters alone (no packing, no meshes), and the refusal of a 
 not fit the machine.
 
 Memory per particle (order of magnitude, the engines' own data structures) is each engine's
-figure (``Engine.bytes_per_particle``, ``base_bytes``, ``parse_copies``: engines/<name>/adapter.py).
+figure (``Engine.bytes_per_particle``, ``base_bytes``, ``parse_copies``: engines/<name>/adapter.py);
+every MPI rank is a process with its own ``base_bytes`` (``Engine.workers_are_processes``), threads
+share one.
 The orchestrator's own packing holds positions, radii and a grid index (~0.2 kB per particle).
 These figures decide refusal only by orders of magnitude: a case is refused when it needs more
 memory than the machine has.
@@ -82,9 +84,12 @@ def estimate(case, params: dict, engine: str) -> dict:
     t_engine, basis = _engine_time(case, params, engine, key, steps, plan, table, machine_speed=True)
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
     steps_expected, _ = planned_steps(table, engine, key, steps, plan)
-    engine_mem = eng.base_bytes + n * eng.bytes_per_particle
+    workers = eng.workers(case)
+    # every MPI rank is a process with the engine's own overhead; threads share one
+    engine_mem = eng.base_bytes * (workers if eng.workers_are_processes else 1) + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
     return {"engine": engine, "particles": n, "steps": steps, "steps_expected": steps_expected, "frames": frames,
+            "workers": workers, "workers_field": eng.workers_field,
             "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
             "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),
             "disk_bytes": int(frames_bytes), "engine_time_s": float(t_engine), "engine_time_basis": basis}
@@ -118,8 +123,17 @@ def problems(case, size: dict) -> list[str]:
     out = []
     mem = machine_memory()
     if size["memory_bytes"] > MEMORY_FRACTION * mem:
-        out.append(f"needs ~{fmt_bytes(size['memory_bytes'])} of memory for {size['particles']:,} particles; this "
-                   f"machine has {fmt_bytes(mem)}")
+        ranks = size.get("workers", 1) if size.get("workers_field") == "mpi_ranks" else 1
+        out.append(f"needs ~{fmt_bytes(size['memory_bytes'])} of memory for {size['particles']:,} particles"
+                   + (f" on {ranks:,} MPI ranks (each a process of the engine's own)" if ranks > 1 else "")
+                   + f"; this machine has {fmt_bytes(mem)}")
+    workers, cores = size.get("workers", 1), os.cpu_count() or 1
+    if workers > cores and not case.engine_options.scheduler:
+        field = size.get("workers_field", "threads")
+        out.append(f"warning: engine_options.{field} = {workers} is more than this machine's {cores} cores: the "
+                   f"{'ranks' if field == 'mpi_ranks' else 'threads'} would share them, which makes the run slower, "
+                   f"not faster (the estimate counts {cores}); set engine_options.{field} to at most {cores}, or "
+                   "send the run to a cluster (engine_options.scheduler)")
     timeout = case.engine_options.timeout
     if size["engine_time_s"] > timeout:
         out.append(f"warning: the estimated engine time {fmt_s(size['engine_time_s'])} exceeds "
@@ -219,8 +233,17 @@ def _engine_time(case: Case, params: dict, engine_name: str, key: str, steps: in
     which underestimates deck runs (the basis says so: :data:`BARE_BASIS`)."""
     eng = get_engine(engine_name)
     n = integrated_particles(params)
-    t, basis = estimate_engine_time(engine_name, key, max(n, 1), steps, eng.workers(case),
+    workers = speedup_workers(case, eng)
+    t, basis = estimate_engine_time(engine_name, key, max(n, 1), steps, workers,
                                     table=table, plan=plan, machine_speed=machine_speed)
     if t == t:         # not NaN: a measured model
         return t, basis
-    return eng.startup + steps * max(n, 1) / (eng.throughput * eng.workers(case)), BARE_BASIS
+    return eng.startup + steps * max(n, 1) / (eng.throughput * workers), BARE_BASIS
+
+
+def speedup_workers(case: Case, eng) -> int:
+    """The workers [-] a run's estimate counts for its speed-up: the engine's ranks or threads,
+    at most this machine's cores for a run on it (more share the cores and run no faster:
+    :func:`problems` warns), all of them for a run sent to a cluster (``engine_options.scheduler``)."""
+    workers = eng.workers(case)
+    return workers if case.engine_options.scheduler else min(workers, os.cpu_count() or 1)

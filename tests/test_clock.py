@@ -472,6 +472,38 @@ def test_a_busy_machine_is_said_and_a_quiet_one_is_not():
     assert b is None or -0.01 <= b <= os.cpu_count() + 0.01
 
 
+def test_more_ranks_than_cores_are_warned_about_and_every_rank_counts_its_memory(monkeypatch):
+    """``mpi_ranks: 3000`` on a 2-core machine validated without a word, with 3000 ranks' speed-up
+    in its estimate and one process's memory: the ranks now count in the memory (each an engine
+    process), the speed-up counts at most the cores, and a warning names the field and the fix;
+    YADE's threads share one process; a run sent to a cluster counts every rank."""
+    from orchestrator.case import load_case
+    from orchestrator.derive import derive
+    from orchestrator.sizing import problems
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    base = load_case("cases/shear_cell_smoke.yaml")
+    params = derive(base)
+
+    def sized(engine, **opts):
+        case = base.model_copy(update={"engine_options": base.engine_options.model_copy(update=opts)})
+        return case, estimate(case, params, engine)
+    _, one = sized("liggghts")
+    case, many = sized("liggghts", mpi_ranks=3000)
+    _, two = sized("liggghts", mpi_ranks=2)
+    assert many["memory_bytes"] - one["memory_bytes"] == pytest.approx(2999 * 50e6)
+    assert many["engine_time_s"] == pytest.approx(two["engine_time_s"])          # no faster than 2 ranks
+    warn = [p for p in problems(case, many) if "more than this machine's 2 cores" in p]
+    assert len(warn) == 1 and "engine_options.mpi_ranks = 3000" in warn[0] and "at most 2" in warn[0]
+    assert any("on 3,000 MPI ranks" in p for p in problems(case, many) if not p.startswith("warning"))
+    assert not [p for p in problems(*sized("liggghts", mpi_ranks=2)) if "cores" in p]
+    case_y, threads = sized("yade", threads=8)
+    assert threads["memory_bytes"] == sized("yade")[1]["memory_bytes"]            # threads share a process
+    assert any("engine_options.threads = 8" in p for p in problems(case_y, threads))
+    case_c, cluster = sized("liggghts", mpi_ranks=8, scheduler="tcp://head:8786")
+    assert not [p for p in problems(case_c, cluster) if "cores" in p]
+    assert cluster["engine_time_s"] < two["engine_time_s"]                        # the cluster's 8 ranks count
+
+
 def test_a_one_rank_run_counts_its_cpu_time_and_a_multi_rank_run_its_wall_time():
     from orchestrator.clock import engine_seconds
     # a one-rank rung paused for 7 min beside the ladder: 510 s of wall time, 70 s of CPU

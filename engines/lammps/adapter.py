@@ -63,6 +63,8 @@ class Lammps(RestartFiles, Engine):
     bytes_per_particle = 2_000
     base_bytes = 50e6
     parse_copies = 2
+    workers_field = "mpi_ranks"           # MPI ranks, each a process of its own (base_bytes each)
+    workers_are_processes = True
     capabilities = {
         "hertz": "pair_style granular hertz/material (E* = E/(2(1-nu^2)))",
         "restitution_damping": "damping coeff_restitution (Tsuji form) with limit_damping (clipped, as LIGGGHTS)",
@@ -104,9 +106,6 @@ class Lammps(RestartFiles, Engine):
     }
 
     # -- discovery -------------------------------------------------------------------------
-    def workers(self, case) -> int:
-        return case.engine_options.mpi_ranks
-
     def available(self) -> bool:
         return find_lmp() is not None
 

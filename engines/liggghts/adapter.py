@@ -56,6 +56,8 @@ class Liggghts(RestartFiles, Engine):
     bytes_per_particle = 2_000
     base_bytes = 50e6
     parse_copies = 2
+    workers_field = "mpi_ranks"           # MPI ranks, each a process of its own (base_bytes each)
+    workers_are_processes = True
     capabilities = {
         "hertz": "pair_style gran model hertz",
         "restitution_damping": "model hertz with coefficientRestitution (Tsuji damping), limitForce on",
@@ -162,9 +164,6 @@ class Liggghts(RestartFiles, Engine):
         deck = run_dir / ("resume.in" if resume else "deck.in")
         render_template(f"liggghts/{case.scene.kind}.in.j2", ctx, deck)
         return deck
-
-    def workers(self, case) -> int:
-        return case.engine_options.mpi_ranks
 
     def complete_resume(self, case, run_dir: Path, resume):
         """The triaxial deck re-enters its stage from ``restart/state.txt``: a restart file is usable
