@@ -139,6 +139,8 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             for k, t in enumerate(tasks):
                 if t.get("refused"):
                     results[k] = {"status": "refused", "error": t["refused"]}
+                    if on_result:                    # said as the other rungs are, with the reason
+                        on_result(t, results[k])
                     continue
                 s = read_summary(t["run_dir"]) or {}
                 if (s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()) \
@@ -163,7 +165,8 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                 ref_obs = ref_obs_of.get(t["seed"], {})
                 problems = scene.sample_problems(Path(t["run_dir"])) if r.get("status") == "complete" else []
                 row = {"engine": eng, knob: t["point"][knob], "seed": t["seed"], "status": r.get("status"),
-                       "sample": "; ".join(problems) or ("ok" if r.get("status") == "complete" else ""),
+                       "sample": "; ".join(problems) or ("ok" if r.get("status") == "complete" else
+                                                         (r.get("error") or "") if r.get("status") == "refused" else ""),
                        "engine_time_s": r.get("engine_time"), "total_time_s": r.get("total_time"),
                        "reference": k == ref_of.get(t["seed"]), "run_id": t["run_id"]}
                 errs = []

@@ -145,10 +145,16 @@ def test_dt_ladder(runs_root, tmp_path, engines_installed):
     assert mu["rungs"] == 2 and np.isfinite(mu["sem_full"])     # two rungs, but their seeds' errors
 
 
-def test_refused_rung_is_a_row(runs_root):
-    # dt_fraction 1.0 is above the coordination limit's safe fraction for this case: refused, not run
-    out = ladder(CASE, "dt_fraction", [1.0], engines=["liggghts"], runs_root=runs_root, reference=1.0)
-    assert out["table"].loc[0, "status"] == "refused"
+def test_refused_rung_is_a_row_that_says_why(runs_root):
+    # dt_fraction 1.0 is above the coordination limit's safe fraction for this case: refused, not run;
+    # the row's sample column and the line said as the rung ends carry the reason (a refused rung
+    # was a row of nan without one: `--values 0 1` for size_scale)
+    said = []
+    out = ladder(CASE, "dt_fraction", [1.0], engines=["liggghts"], runs_root=runs_root, reference=1.0,
+                 on_result=lambda task, res: said.append((task["point"], res)))
+    row = out["table"].loc[0]
+    assert row["status"] == "refused" and "is unsafe" in row["sample"]
+    assert said == [({"dt_fraction": 1.0}, {"status": "refused", "error": row["sample"]})]
 
 
 def test_a_misspelt_knob_or_field_is_one_message_before_any_run(tmp_path):
