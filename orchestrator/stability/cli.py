@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import glob
 import json
+import os
 from pathlib import Path
 
 from ..console import console
@@ -74,7 +75,12 @@ def _say_run_ended(con):
 
 
 def cmd_convergence(args) -> int:
-    from .convergence import ladder
+    from .convergence import ladder, ladder_plan
+    if args.dry_run:
+        return _print_plan(ladder_plan(args.case, args.knob, [_val(v) for v in args.values],
+                                       engines=None if args.engine == "all" else [args.engine],
+                                       runs_root=args.runs, seeds=args.seeds),
+                           f"ladder of {args.case}, knob {args.knob}: the runs before any of them", args.workers)
     out = ladder(args.case, args.knob, [_val(v) for v in args.values],
                  engines=None if args.engine == "all" else [args.engine], runs_root=args.runs,
                  reference=args.reference, target_error=args.target_error, scheduler=args.scheduler,
@@ -117,13 +123,43 @@ def cmd_convergence(args) -> int:
     return 0
 
 
+def _print_plan(plan, title: str, workers: int | None) -> int:
+    """Print a ladder's or sweep's runs as a dry run lists them, and the engine time of those still
+    to run on one worker and on ``workers`` (each run's estimate; no packing, mesh or run
+    directory); 0, or 2 when every run is refused."""
+    import pandas as pd
+
+    from ..humanize import fmt_s
+    show = plan.drop(columns=["run_dir", "note"]).copy()
+    show["engine_time"] = [fmt_s(t) if t == t else "" for t in show.pop("engine_time_s")]
+    show["note"] = plan["note"]
+    for c in ("particles", "steps"):
+        show[c] = ["" if pd.isna(v) else f"{int(v):,}" for v in show[c]]
+    _print_df(show, title)
+    todo = plan[plan["status"] == "to run"]
+    total = float(todo["engine_time_s"].sum())
+    con = console()
+    n_w = max(int(workers or 1), 1)
+    longest = float(todo["engine_time_s"].max()) if len(todo) else 0.0
+    counts = (f"{len(todo)} run(s) to do, {int((plan['status'] == 'reused').sum())} reused, "
+              f"{int((plan['status'] == 'refused').sum())} refused")
+    con.print(counts + (f": ~{fmt_s(total)} of engine time on one worker"
+                        + (f", at least ~{fmt_s(max(total / n_w, longest))} on {n_w}" if n_w > 1 and len(todo) > 1 else "")
+                        + " (each run's estimate, as `run --dry-run` prints it)" if len(todo) else ": nothing to run"))
+    return 2 if len(plan) and (plan["status"] == "refused").all() else 0
+
+
 def _val(v: str):
     import yaml
     return yaml.safe_load(v)
 
 
 def cmd_sweep(args) -> int:
-    from .sweep import sweep
+    from .sweep import sweep, sweep_plan
+    if args.dry_run:
+        return _print_plan(sweep_plan(args.case, args.set, grid=args.grid,
+                                      engines=None if args.engine == "all" else [args.engine], runs_root=args.runs),
+                           f"sweep of {args.case}: the runs before any of them", args.workers or os.cpu_count())
     df = sweep(args.case, args.set, grid=args.grid, engines=None if args.engine == "all" else [args.engine],
                runs_root=args.runs, scheduler=args.scheduler, workers=args.workers, on_result=_say_run_ended(console()),
                force=args.force)
@@ -186,6 +222,9 @@ def add_parsers(sub):
     c.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
     c.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: clean timings)")
     c.add_argument("--plot", help="plot file (default RUNS/convergence/CASE-KNOB.png)")
+    c.add_argument("--dry-run", action="store_true",
+                   help="list the ladder's runs (reused, to run, refused), each one's size and estimated engine "
+                        "time, and the total; nothing is packed or run")
     c.add_argument("--csv", help="also write the table as CSV (and the extrapolation as CSV-extrapolation.csv)")
     c.set_defaults(func=cmd_convergence)
 
@@ -198,6 +237,9 @@ def add_parsers(sub):
     w.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (default: local processes)")
     w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
     w.add_argument("--force", action="store_true", help="re-run finished runs too")
+    w.add_argument("--dry-run", action="store_true",
+                   help="list the sweep's runs (reused, to run, refused), each one's size and estimated engine "
+                        "time, and the total; nothing is packed or run")
     w.set_defaults(func=cmd_sweep)
 
     k = sub.add_parser("calibrate", help="mu calibration in plane shear (seed 000 §3.2)")

@@ -31,7 +31,7 @@ from ..runner import run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
 from .observables import SPREAD_SUFFIXES
-from .sweep import _finished, nested, refuse_unknown_fields
+from .sweep import _finished, nested, plan_table, refuse_unknown_fields
 from ..analysis._common import save_figure
 
 KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count", "size_scale")
@@ -99,6 +99,42 @@ def pareto(times, errors) -> list[int]:
     return front
 
 
+def ladder_tasks(case_path, knob: str, values: list, engine: str, runs_root="runs",
+                 seeds: list[int] | None = None) -> list[dict]:
+    """The runs of a ladder on one ``engine``, rung by rung and seed by seed: each a task of
+    :func:`.executor.run_task` (case, overrides, engine, runs root, its point and run directory),
+    or, for a rung whose case the loader refuses (e.g. a dt the pre-run check calls unsafe), a
+    task with the reason under ``refused`` and no run directory: a row, not a crash."""
+    tasks = []
+    for v, seed in [(v, sd) for v in values for sd in (seeds or [None])]:
+        ov = knob_overrides(case_path, knob, v)
+        if seed is not None:
+            ov = dict(ov, seed=int(seed))
+        try:
+            c = load_case(case_path, overrides=ov)
+        except CaseError as exc:
+            tasks.append({"case": str(case_path), "overrides": ov, "engine": engine, "point": {knob: v},
+                          "run_dir": None, "run_id": None, "refused": str(exc), "seed": seed})
+            continue
+        rd = run_dir_for(c, engine, runs_root)
+        tasks.append({"case": str(case_path), "overrides": ov, "engine": engine, "runs_root": str(runs_root),
+                      "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name, "seed": seed})
+    return tasks
+
+
+def ladder_plan(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
+                seeds: list[int] | None = None):
+    """What a ladder would run, before any run (``orchestrator convergence ... --dry-run``): the
+    table of :func:`.sweep.plan_table`, a row per engine, rung (column ``knob``) and seed."""
+    import pandas as pd
+    case0 = load_case(case_path)
+    refuse_unknown_fields(case0, case_path, [knob], also=KNOBS, flag="--knob")
+    tasks = [t for eng in engines or case0.engines for t in ladder_tasks(case_path, knob, values, eng, runs_root, seeds)]
+    table = plan_table(tasks)
+    cols = pd.DataFrame({knob: [t["point"][knob] for t in tasks], "seed": [t["seed"] for t in tasks]})
+    return pd.concat([table[["engine"]], cols, table.drop(columns=["engine"])], axis=1)
+
+
 def ladder(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
            reference=None, target_error: float = 0.05, scheduler=None, workers: int | None = 1,
            observables_used: list[str] | None = None, plot: str | Path | None = None, full=None,
@@ -120,20 +156,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     ex = get_executor(scheduler, workers)
     try:
         for eng in engines:
-            tasks = []
-            for v, seed in [(v, sd) for v in values for sd in (seeds or [None])]:
-                ov = knob_overrides(case_path, knob, v)
-                if seed is not None:
-                    ov = dict(ov, seed=int(seed))
-                try:
-                    c = load_case(case_path, overrides=ov)
-                except CaseError as exc:             # e.g. a dt the pre-run check refuses: a row, not a crash
-                    tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "point": {knob: v},
-                                  "run_dir": None, "run_id": None, "refused": str(exc), "seed": seed})
-                    continue
-                rd = run_dir_for(c, eng, runs_root)
-                tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
-                              "point": {knob: v}, "run_dir": str(rd), "run_id": rd.name, "seed": seed})
+            tasks = ladder_tasks(case_path, knob, values, eng, runs_root, seeds)
             results = [None] * len(tasks)
             todo = []
             for k, t in enumerate(tasks):

@@ -112,6 +112,51 @@ def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]
     return tasks
 
 
+def plan_table(tasks: list[dict]):
+    """The runs of a sweep or ladder before any of them (``--dry-run``), as a DataFrame with a row
+    per task: ``engine``, ``status`` (``reused``: complete under its runs root; ``to run``, its
+    ``note`` saying when it was started before and resumes from its last restart point;
+    ``refused``: the loader refused the point's case, the reason in ``note``), the run's
+    ``particles``, ``steps`` (expected: a triaxial's stage 1 as the engine's measured runs took
+    it), ``engine_time_s`` (:func:`orchestrator.sizing.estimate`: no packing, mesh or run
+    directory) and ``run_dir``."""
+    import pandas as pd
+
+    from ..derive import derive
+    from ..sizing import estimate
+    rows = []
+    for t in tasks:
+        why = t.get("refused") or t.get("invalid")
+        row = {"engine": t["engine"], "status": "refused", "particles": None, "steps": None,
+               "engine_time_s": float("nan"), "note": why or "", "run_dir": t["run_dir"]}
+        if not why:
+            case = load_case(t["case"], overrides=t["overrides"] or None)
+            size = estimate(case, derive(case), t["engine"])
+            s = read_summary(t["run_dir"]) or {}
+            done = s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()
+            row.update(status="reused" if done else "to run", particles=size["particles"],
+                       steps=size.get("steps_expected", size["steps"]), engine_time_s=size["engine_time_s"],
+                       note="" if done or not s else "started before: resumes from its last restart point "
+                                                     "(`orchestrator status` says how far it got)")
+        rows.append(row)
+    return pd.DataFrame(rows, columns=["engine", "status", "particles", "steps", "engine_time_s", "note", "run_dir"]
+                        ).astype({"particles": "Int64", "steps": "Int64"})
+
+
+def sweep_plan(case_path, sets: dict[str, list] | list[str], grid: bool = False, engines: list[str] | None = None,
+               runs_root="runs"):
+    """What a sweep would run, before any run (``orchestrator sweep ... --dry-run``): the table of
+    :func:`plan_table` with a column per swept field."""
+    import pandas as pd
+    if isinstance(sets, list):
+        sets = parse_sets(sets)
+    refuse_unknown_fields(load_case(case_path), case_path, list(sets))
+    tasks = [t for pt in points(sets, grid) for t in plan_point(case_path, pt, engines, runs_root)]
+    table = plan_table(tasks)
+    cols = pd.DataFrame([t["point"] for t in tasks])
+    return pd.concat([table[["engine"]], cols, table.drop(columns=["engine"])], axis=1)
+
+
 def _finished(task: dict) -> dict:
     """The result of a run that is already there (no engine started)."""
     s = read_summary(task["run_dir"])

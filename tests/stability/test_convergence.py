@@ -206,3 +206,40 @@ def test_size_and_count_knobs_scale_each_scene_as_it_defines_its_size():
     # h = 1/size: the ideal limit is the infinite system
     assert fidelity_distance("size_scale", [2.0])[0] == pytest.approx(0.5)
     assert knob_value("size_scale", 0.25) == pytest.approx(4.0)
+
+
+@pytest.mark.engine                  # the run directories' names probe the engine's version
+def test_a_dry_run_lists_the_runs_their_estimates_and_what_is_reused(tmp_path):
+    """``convergence --dry-run`` and ``sweep --dry-run``: every run the command would make, before
+    any (nothing packed, nothing written under the runs root), each with its size and estimated
+    engine time (as ``run --dry-run`` gives it), a complete run reused, a rung the loader refuses
+    with its reason, and the CLI's total of the runs to do."""
+    from orchestrator.case import load_case
+    from orchestrator.cli import main
+    from orchestrator.derive import derive
+    from orchestrator.sizing import estimate
+    from orchestrator.stability.convergence import knob_overrides, ladder_plan
+    from orchestrator.stability.sweep import sweep_plan
+    plan = ladder_plan(CASE, "dt_fraction", [0.2, 0.3, 1.0], engines=["liggghts"], runs_root=tmp_path, seeds=[7])
+    assert list(plan["dt_fraction"]) == [0.2, 0.3, 1.0] and list(plan["seed"]) == [7, 7, 7]
+    assert list(plan["status"]) == ["to run", "to run", "refused"] and "is unsafe" in plan["note"].iloc[2]
+    case = load_case(CASE, overrides=dict(knob_overrides(CASE, "dt_fraction", 0.2), seed=7))
+    size = estimate(case, derive(case), "liggghts")
+    assert plan["engine_time_s"].iloc[0] == pytest.approx(size["engine_time_s"])
+    assert plan["particles"].iloc[0] == size["particles"] and plan["steps"].iloc[0] == size["steps_expected"]
+    assert not any(tmp_path.iterdir())                         # nothing planned is written
+    # a complete run under the runs root is reused; one started before resumes, and says so
+    done, started = (Path(p) for p in plan["run_dir"].iloc[:2])
+    for d, status in ((done, "complete"), (started, "interrupted")):
+        d.mkdir(parents=True)
+        (d / "summary.json").write_text(f'{{"status": "{status}", "steps_run": 100}}')
+    (done / "frames.h5").write_bytes(b"")
+    again = ladder_plan(CASE, "dt_fraction", [0.2, 0.3, 1.0], engines=["liggghts"], runs_root=tmp_path, seeds=[7])
+    assert list(again["status"]) == ["reused", "to run", "refused"] and "resumes" in again["note"].iloc[1]
+    sw = sweep_plan(CASE, ["timestep.fraction=0.2,1.0"], engines=["liggghts"], runs_root=tmp_path)
+    assert list(sw["timestep.fraction"]) == [0.2, 1.0] and list(sw["status"]) == ["reused", "refused"]
+    # the CLI: the table and the total of the runs to do; 2 when every run is refused
+    assert main(["convergence", str(CASE), "--knob", "dt_fraction", "--values", "0.3", "--engine", "liggghts",
+                 "--runs", str(tmp_path), "--seeds", "7", "--dry-run"]) == 0
+    assert main(["sweep", str(CASE), "--set", "timestep.fraction=1.0", "--engine", "liggghts", "--runs",
+                 str(tmp_path), "--dry-run"]) == 2
