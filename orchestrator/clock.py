@@ -831,7 +831,7 @@ def fit(samples: list[RunSample]) -> Throughput:
     units = [s.units for s in samples if s.units is not None]
     med_units = float(np.median(units)) if units else None
     if units:
-        note += f"; {med_units:g} units (median of {len(units)}" + (f", {min(units):g}-{max(units):g})" if len(units) > 1 else ")")
+        note += _units_note(units)
     if startup_n > 0:
         note += f"; start-up {startup:.3g} s + {startup_n:.3g} s per particle"
     if alpha > 1:
@@ -844,6 +844,12 @@ def units_range(units) -> tuple[float, float] | None:
     """(fewest, most) units [-] of two runs or more, else None (:attr:`Throughput.units_range`)."""
     units = [float(u) for u in units if u is not None]
     return (min(units), max(units)) if len(units) >= 2 else None
+
+
+def _units_note(units, extra: str = "") -> str:
+    """The note's clause on the units the runs took: their median, how many, their range."""
+    span = f", {min(units):g}-{max(units):g}" if len(units) > 1 else ""
+    return f"; {float(np.median(units)):g} units (median of {len(units)}{span}{extra})"
 
 
 def _nonnegative_line(ns, y) -> tuple[float, float]:
@@ -906,9 +912,8 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False, add: bool 
         med = float(np.median(units))
         entry["units"] = med
         entry["units_range"] = units_range(units)
-        span = f", {min(units):g}-{max(units):g}" if len(units) > 1 else ""
         entry["note"] = (re.sub(r"; [\d.e+-]+ units \(median of \d+[^)]*\)", "", entry.get("note", ""))
-                         + f"; {med:g} units (median of {len(units)}{span}, steps refreshed alone)")
+                         + _units_note(units, ", steps refreshed alone"))
         fitted.setdefault(eng, {})[sc] = Throughput.from_dict(entry)
         entries[eng, sc] = entry             # its costs and the runs it keeps unchanged
     for (eng, sc), entry in entries.items():
