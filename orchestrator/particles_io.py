@@ -31,9 +31,11 @@ def write_particle_table(path, ids, radius, density, position, velocity=None) ->
 
 
 def read_particle_table(path) -> dict:
+    """``particles.txt`` as arrays: id, radius [m], density [kg/m³], position [m], velocity [m/s],
+    and each sphere's mass ρ 4/3 π r³ [kg] (what every adapter writes into frames.h5)."""
     a = np.loadtxt(path, ndmin=2)
     return {"id": a[:, 0].astype(np.int64), "radius": a[:, 1], "density": a[:, 2],
-            "position": a[:, 3:6], "velocity": a[:, 6:9]}
+            "position": a[:, 3:6], "velocity": a[:, 6:9], "mass": a[:, 2] * 4 / 3 * np.pi * a[:, 1] ** 3}
 
 
 def ensure_particle_table(run_dir, case, sample) -> Path:

@@ -224,7 +224,7 @@ class Lammps(RestartFiles, Engine):
             raise EngineError(f"{run_dir / 'dump'}: LAMMPS wrote no frames\n{tail(run_dir / 'engine.log')}")
         table = read_particle_table(run_dir / "particles.txt")
         ids = table["id"]
-        mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
+        mass = table["mass"]
         fields = case.output.fields(FRAME_FIELDS)
         cols = json.loads((run_dir / "dump" / "columns.json").read_text())
         snaps = list(read_binary_dump(segments, len(cols)))

@@ -227,7 +227,7 @@ class Liggghts(RestartFiles, Engine):
             raise EngineError(f"{run_dir / 'dump'}: LIGGGHTS wrote no frames\n{tail(run_dir / 'engine.log')}")
         table = read_particle_table(run_dir / "particles.txt")
         ids = table["id"]
-        mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
+        mass = table["mass"]
         fields = _fields(case)
         dt = params["dt"]
         cols = json.loads((run_dir / "dump" / "columns.json").read_text())

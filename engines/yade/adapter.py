@@ -185,7 +185,7 @@ class Yade(Engine):
             raise EngineError(f"{run_dir}/dump: YADE wrote no frames\n{tail(run_dir / 'engine.log')}")
         table = read_particle_table(run_dir / "particles.txt")
         ids = table["id"]
-        mass = table["density"] * 4 / 3 * np.pi * table["radius"] ** 3
+        mass = table["mass"]
         extras = get_scene(case.scene.kind).post(run_dir, params, ChunkOutput(run_dir))
         membrane = membrane_series(run_dir)
         if membrane is not None:                # the triaxial membrane's nodes at the frame times
