@@ -240,10 +240,10 @@ class Engine(ABC):
 
     # -- running ---------------------------------------------------------------------------
     def run(self, deck: Path, case, total_steps: int, log: Path, timeout: float,
-            progress: bool = True, env: dict | None = None, first_step: int = 0,
+            progress: bool | str = True, env: dict | None = None, first_step: int = 0,
             expected_steps: int | None = None) -> RunResult:
         """Run the engine on ``deck`` in its directory, streaming output into ``log``, with a
-        progress bar fed by the engine's step counter (toward ``expected_steps`` where the scene
+        progress bar (a string ``progress``: under that label) fed by the engine's step counter (toward ``expected_steps`` where the scene
         decides its length while it runs and fewer than ``total_steps`` are expected), a wall-clock
         ``timeout`` [s] and a kill.
         The attempt's steps (from ``first_step``, the resume point) and engine time go into the run
@@ -261,7 +261,8 @@ class Engine(ABC):
         with open(log, "ab") as logf:
             proc = subprocess.Popen(cmd, cwd=run_dir, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                     env=full_env, start_new_session=True, preexec_fn=_die_with_parent)
-            bar = _Progress(f"{self.name} {case.name}", total_steps, enabled=progress, expected=expected_steps)
+            label = progress if isinstance(progress, str) else f"{self.name} {case.name}"     # a ladder's rung names itself
+            bar = _Progress(label, total_steps, enabled=bool(progress), expected=expected_steps)
             attempt = AttemptRecord(run_dir, first_step, self.workers(case))
             try:
                 sel = selectors.DefaultSelector()

@@ -142,9 +142,11 @@ def prepare(case: Case, engine_name: str, run_dir: Path, params: Params | None =
 
 
 def run_case(case: Case, engine_name: str, runs_root="runs", force: bool = False, dry_run: bool = False,
-             progress: bool | None = None, analyze: bool = True) -> RunOutcome:
+             progress: bool | str | None = None, analyze: bool = True) -> RunOutcome:
     """Render, run, parse (and analyse) one case on one engine. With
-    ``case.engine_options.scheduler`` set, the run goes to a Dask worker (:func:`run_on_cluster`)."""
+    ``case.engine_options.scheduler`` set, the run goes to a Dask worker (:func:`run_on_cluster`).
+    ``progress``: the engine's progress bar or lines (None: ``engine_options.progress``), a string
+    to show them under that label (a ladder's rung: the engine, case and knob value)."""
     if case.engine_options.scheduler and not dry_run:
         return run_on_cluster(case, engine_name, case.engine_options.scheduler, runs_root=runs_root, force=force,
                               analyze=analyze)

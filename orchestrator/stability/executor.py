@@ -23,14 +23,15 @@ from ..derive import derive
 def run_task(task: dict) -> dict:
     """Run one case on one engine (picklable, top level: runs in a worker process or on a Dask
     worker). ``task``: ``case`` (path), ``overrides`` (nested dict), ``engine``, ``runs_root``,
-    optional ``force``. Returns the run's status, directory, wall time and observables; never
-    raises."""
+    optional ``force`` and ``progress`` (a label: the run's progress lines under it, as a ladder
+    run rung by rung shows them; default none). Returns the run's status, directory, wall time
+    and observables; never raises."""
     import time
     t0 = time.perf_counter()
     try:
         case = load_case(task["case"], overrides=task.get("overrides") or None)
         out = run_case(case, task["engine"], runs_root=task["runs_root"], force=task.get("force", False),
-                       progress=False, analyze=task.get("analyze", False))
+                       progress=task.get("progress") or False, analyze=task.get("analyze", False))
         res = {"status": out.status, "run_dir": str(out.run_dir), "reused": out.reused,
                "engine_time": run_engine_seconds(out.run_dir, out.summary),
                "total_time": out.summary.get("wall_time", {}).get("total"),

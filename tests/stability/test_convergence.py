@@ -243,3 +243,28 @@ def test_a_dry_run_lists_the_runs_their_estimates_and_what_is_reused(tmp_path):
                  "--runs", str(tmp_path), "--seeds", "7", "--dry-run"]) == 0
     assert main(["sweep", str(CASE), "--set", "timestep.fraction=1.0", "--engine", "liggghts", "--runs",
                  str(tmp_path), "--dry-run"]) == 2
+
+
+@pytest.mark.engine                  # the run directories' names probe the engine's version
+def test_a_ladder_run_rung_by_rung_shows_each_rungs_progress_under_its_name(monkeypatch):
+    """A ladder of hour-long rungs printed nothing between two rungs' ends: run one rung at a time
+    on this machine, each rung's progress lines now show, named by engine, case, knob value and
+    seed (``run_task``'s ``progress`` label); several workers or a cluster keep them off."""
+    from orchestrator.stability import convergence
+    seen = []
+
+    class Recorder:
+        def __init__(self, workers):
+            self.workers = workers
+
+        def run(self, fn, tasks):
+            seen.append([t.get("progress") for t in tasks])
+            return iter([(j, {"status": "failed", "error": "not run"}) for j in range(len(tasks))])
+
+        def close(self):
+            pass
+    for workers in (1, 2):
+        monkeypatch.setattr(convergence, "get_executor", lambda scheduler, w, n=workers: Recorder(n))
+        convergence.ladder(CASE, "dt_fraction", [0.2, 0.3], engines=["liggghts"], runs_root="/nonexistent/runs",
+                           seeds=[7], reference=0.3)
+    assert seen == [["liggghts mu1 dt_fraction=0.2 seed 7", "liggghts mu1 dt_fraction=0.3 seed 7"], [None, None]]
