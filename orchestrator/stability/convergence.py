@@ -31,7 +31,7 @@ from ..runner import run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
 from .observables import SPREAD_SUFFIXES
-from .sweep import _finished, nested, plan_table, refuse_unknown_fields
+from .sweep import _finished, nested, plan_table, refuse_unknown_fields, run_label
 from ..analysis._common import save_figure
 
 KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count", "size_scale")
@@ -122,13 +122,6 @@ def ladder_tasks(case_path, knob: str, values: list, engine: str, runs_root="run
     return tasks
 
 
-def _rung_label(task: dict) -> str:
-    """A rung's name in its progress lines: engine, case, knob value and seed."""
-    (knob, value), = task["point"].items()
-    return (f"{task['engine']} {Path(task['case']).stem} {knob}={value}"
-            + (f" seed {task['seed']}" if task.get("seed") is not None else ""))
-
-
 def ladder_plan(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
                 seeds: list[int] | None = None):
     """What a ladder would run, before any run (``orchestrator convergence ... --dry-run``): the
@@ -183,7 +176,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
             # one rung at a time on this machine: each shows its progress lines, named by its rung
             sequential = ex.workers == 1 and scheduler is None
             for j, res in ex.run(run_task, [{kk: vv for kk, vv in tasks[k].items() if kk != "seed"}
-                                            | ({"progress": _rung_label(tasks[k])} if sequential else {}) for k in todo]):
+                                            | ({"progress": run_label(tasks[k])} if sequential else {}) for k in todo]):
                 results[todo[j]] = res
                 if on_result:
                     on_result(tasks[todo[j]], res)

@@ -112,6 +112,14 @@ def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]
     return tasks
 
 
+def run_label(task: dict) -> str:
+    """A run's name in its progress lines when a sweep or ladder runs one at a time: engine, case,
+    the point's values and the seed (``liggghts shear_cell_small rate_scale=0.5 seed 2``)."""
+    point = ", ".join(f"{k}={v}" for k, v in task["point"].items())
+    return (f"{task['engine']} {Path(task['case']).stem} {point}"
+            + (f" seed {task['seed']}" if task.get("seed") is not None else ""))
+
+
 def plan_table(tasks: list[dict]):
     """The runs of a sweep or ladder before any of them (``--dry-run``), as a DataFrame with a row
     per task: ``engine``, ``status`` (``reused``: complete under its runs root; ``to run``, its
@@ -216,9 +224,11 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
                     record(k, _finished(t))
                 else:
                     todo.append(k)
-                    yield dict(t, force=force)
+                    # one run at a time on this machine: its progress lines show, under its name
+                    yield dict(t, force=force) | ({"progress": run_label(t)} if sequential else {})
 
     ex = executor or get_executor(scheduler, workers)
+    sequential = executor is None and scheduler is None and ex.workers == 1
     try:
         for j, res in ex.run(run_task, to_run()):
             record(todo[j], res)
