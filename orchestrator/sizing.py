@@ -187,9 +187,11 @@ def check_fits(case, size: dict, force: bool = False) -> list[str]:
     hard = [p for p in probs if not p.startswith("warning:")]
     if hard and not force:
         src = case.source or case.name
+        ranks = size.get("workers", 1) if size.get("workers_field") == "mpi_ranks" else 1
+        fewer = f"fewer engine_options.mpi_ranks than {ranks:,}, " if ranks > 1 else ""
         raise SizeError(f"{src}: case '{case.name}' on {size['engine']} is too big for this machine: "
-                        + "; ".join(hard) + f" ({describe(size)}). Shrink the case (scene size, particle size "
-                        "distribution) or give --force to run it anyway")
+                        + "; ".join(hard) + f" ({describe(size)}). Shrink the case ({fewer}scene size, particle "
+                        "size distribution) or give --force to run it anyway")
     return [p for p in probs if p.startswith("warning:")] + (["warning: forced past: " + "; ".join(hard)]
                                                              if hard else [])
 

@@ -12,7 +12,7 @@ import pytest
 from orchestrator.clock import (RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
                                 refresh, step_plan)
 from orchestrator.humanize import fmt_s
-from orchestrator.sizing import _basis_note, busy_cores, busy_note, describe, estimate
+from orchestrator.sizing import SizeError, _basis_note, busy_cores, busy_note, check_fits, describe, estimate
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -495,6 +495,8 @@ def test_more_ranks_than_cores_are_warned_about_and_every_rank_counts_its_memory
     warn = [p for p in problems(case, many) if "more than this machine's 2 cores" in p]
     assert len(warn) == 1 and "engine_options.mpi_ranks = 3000" in warn[0] and "at most 2" in warn[0]
     assert any("on 3,000 MPI ranks" in p for p in problems(case, many) if not p.startswith("warning"))
+    with pytest.raises(SizeError, match="fewer engine_options.mpi_ranks than 3,000"):
+        check_fits(case, many)
     assert not [p for p in problems(*sized("liggghts", mpi_ranks=2)) if "cores" in p]
     case_y, threads = sized("yade", threads=8)
     assert threads["memory_bytes"] == sized("yade")[1]["memory_bytes"]            # threads share a process
