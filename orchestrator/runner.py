@@ -33,7 +33,6 @@ from .initial_packing import apply_initial_packing, packing_digest, verify_writt
 from .params import Params, thaw
 from .registry import get_engine, get_scene
 from .run_summary import lock_held, read_summary
-from .resources import data_file
 from .stability.monitors import read_verdict
 from .integrity import verify_run, run_record
 from .twins import adopt_twin, find_twin

@@ -14,10 +14,14 @@ from __future__ import annotations
 
 import os
 import time
+from typing import TYPE_CHECKING
 
 from .clock import ASSUMED_WORDS, SPREAD_WORDS, clock_key, estimate_engine_time, load_table, planned_steps, step_plan
 from .humanize import fmt_bytes, fmt_s
 from .registry import get_engine
+
+if TYPE_CHECKING:
+    from .case import Case
 
 #: the orchestrator's packing and particle table [bytes per particle]
 PACKING_BYTES_PER_PARTICLE = 200

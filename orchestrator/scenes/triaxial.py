@@ -54,7 +54,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, model_validator
 
 from ..atomic import cache_dir, write_json, write_text
 from ..case import Strict, positive

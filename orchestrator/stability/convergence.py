@@ -327,7 +327,6 @@ def plot_ladder(df, knob: str, path, target_error: float, ext=None):
     with_ext = ext is not None and len(ext) > 0
     fig, axes = plt.subplots(1, 2 if with_ext else 1, figsize=(11.5 if with_ext else 6, 4.5))
     ax = axes[0] if with_ext else axes
-    floor = None
     for eng, g in df.groupby("engine"):
         ref = g[g["reference"]]
         t_ref = pd.to_numeric(ref["engine_time_s"], errors="coerce").to_numpy(float)

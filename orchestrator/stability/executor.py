@@ -11,7 +11,7 @@ import os
 import traceback
 from abc import ABC, abstractmethod
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Iterable, Iterator
+from typing import Callable, Iterator
 from ..case import load_case
 from ..clock import run_engine_seconds
 from ..runner import run_case

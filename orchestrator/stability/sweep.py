@@ -16,6 +16,7 @@ import itertools
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 
@@ -27,6 +28,9 @@ from ..run_summary import read_summary
 from ..runner import run_dir_for
 from .executor import get_executor, run_task
 from .observables import observables
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def parse_sets(sets: list[str]) -> dict[str, list]:
@@ -186,7 +190,6 @@ def sweep(case_path, sets: dict[str, list] | list[str], grid: bool = False, engi
     """Run (or reuse) every point on every engine; returns one row per run. ``scheduler``: a Dask
     address, Client or cluster (else local processes, ``workers`` of them, default one per core).
     ``force`` re-runs even finished runs."""
-    import pandas as pd
     if isinstance(sets, list):
         sets = parse_sets(sets)
     case0 = load_case(case_path)
