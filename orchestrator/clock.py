@@ -738,6 +738,18 @@ def step_plan(kind: str, scene_params: dict):
         return None
 
 
+def run_step_plan(run_dir):
+    """The step plan (:func:`step_plan`) of the run in ``run_dir``, from its ``params.json`` and the
+    scene kind of its ``case.yaml``; None for a fixed step count or a run without those files."""
+    run_dir = Path(run_dir)
+    try:
+        params = json.loads((run_dir / "params.json").read_text())
+        kind = ((yaml.safe_load((run_dir / "case.yaml").read_text()) or {}).get("scene") or {}).get("kind", "")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return step_plan(kind, params.get("scene") or {})
+
+
 def expected_steps(budget: int, plan, tp: Throughput | None) -> int:
     """Steps a run is expected to take [-]: the derived ``budget`` for a fixed step count, else the
     plan's fixed part plus the units the engine's measured runs took (the budget until measured)."""

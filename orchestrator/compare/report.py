@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
-from ..clock import step_plan
+from ..clock import run_step_plan
 from ..results import key_results
 from ..analysis.plots import _fig
 from ..frames import Frames
@@ -133,7 +132,7 @@ def _subs_html(subs: list) -> str:
 # ------------------------------------------------------------------------------------ run report
 def _steps_row(run_dir: Path, run: int, planned: int) -> dict:
     """The check that a run took the steps it should: all of them for a fixed step count; for a
-    scene that decides its length while it runs (:func:`orchestrator.clock.step_plan`: the
+    scene that decides its length while it runs (:func:`orchestrator.clock.run_step_plan`: the
     triaxial's stage 1 goes on chunk by chunk until it converges) the plan's fixed part and a
     whole number of its chunks, at most the budget (YADE's last step may be one past a chunk's
     end). A triaxial that converged early used to read FAIL here (88 320 of a 222 720-step budget)."""
@@ -141,12 +140,7 @@ def _steps_row(run_dir: Path, run: int, planned: int) -> dict:
            "status": "ok" if run >= planned else "FAIL", "source": "summary.json"}
     if run >= planned:
         return row
-    try:
-        params = json.loads((run_dir / "params.json").read_text())
-        kind = (yaml.safe_load((run_dir / "case.yaml").read_text()) or {}).get("scene", {}).get("kind", "")
-    except (OSError, ValueError, AttributeError):
-        return row
-    plan = step_plan(kind, params.get("scene") or {})
+    plan = run_step_plan(run_dir)
     if plan is None:
         return row
     chunks = plan.chunks_of(run)

@@ -26,12 +26,11 @@ import numpy as np
 
 from ..case import CaseError, load_case
 from ..registry import get_scene
-from ..run_summary import read_summary
 from ..runner import run_dir_for
 from .executor import get_executor, run_task
 from .extrapolation import extrapolate, fidelity_distance
 from .observables import SPREAD_SUFFIXES
-from .sweep import _finished, nested, plan_table, refuse_unknown_fields, run_label
+from .sweep import _finished, finished, nested, plan_table, refuse_unknown_fields, run_label
 from ..analysis._common import save_figure
 
 KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "count", "size_scale")
@@ -165,9 +164,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                     if on_result:                    # said as the other rungs are, with the reason
                         on_result(t, results[k])
                     continue
-                s = read_summary(t["run_dir"]) or {}
-                if (s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()) \
-                        or s.get("status") == "unstable":
+                if finished(t["run_dir"]):
                     results[k] = _finished(t)
                     if on_result:
                         on_result(t, results[k])

@@ -97,6 +97,13 @@ def plan(case_path, pts: list[dict], engines: list[str], runs_root) -> list[dict
     return [t for pt in pts for t in plan_point(case_path, pt, engines, runs_root)]
 
 
+def finished(run_dir) -> bool:
+    """Whether a sweep or ladder reuses the run in ``run_dir`` rather than running it: complete
+    with its frames, or stopped as unstable (running it again would stop the same way)."""
+    s = read_summary(run_dir) or {}
+    return (s.get("status") == "complete" and (Path(run_dir) / "frames.h5").exists()) or s.get("status") == "unstable"
+
+
 def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]:
     """The tasks of one point (one per engine); an invalid point gives tasks marked ``invalid``."""
     ov = nested(pt)
@@ -109,10 +116,8 @@ def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]
     tasks = []
     for eng in (engines or case.engines):
         rd = run_dir_for(case, eng, runs_root)
-        s = read_summary(rd) or {}
-        done = (s.get("status") == "complete" and (rd / "frames.h5").exists()) or s.get("status") == "unstable"
         tasks.append({"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
-                      "point": pt, "run_dir": str(rd), "run_id": rd.name, "done": done})
+                      "point": pt, "run_dir": str(rd), "run_id": rd.name, "done": finished(rd)})
     return tasks
 
 
@@ -126,7 +131,7 @@ def run_label(task: dict) -> str:
 
 def plan_table(tasks: list[dict]):
     """The runs of a sweep or ladder before any of them (``--dry-run``), as a DataFrame with a row
-    per task: ``engine``, ``status`` (``reused``: complete under its runs root; ``to run``, its
+    per task: ``engine``, ``status`` (``reused``: :func:`finished` under its runs root; ``to run``, its
     ``note`` saying when it was started before and resumes from its last restart point;
     ``refused``: the loader refused the point's case, the reason in ``note``), the run's
     ``particles``, ``steps`` (expected: a triaxial's stage 1 as the engine's measured runs took
@@ -144,11 +149,11 @@ def plan_table(tasks: list[dict]):
         if not why:
             case = load_case(t["case"], overrides=t["overrides"] or None)
             size = estimate(case, derive(case), t["engine"])
-            s = read_summary(t["run_dir"]) or {}
-            done = s.get("status") == "complete" and (Path(t["run_dir"]) / "frames.h5").exists()
+            done = finished(t["run_dir"])
+            started = (Path(t["run_dir"]) / "summary.json").exists()
             row.update(status="reused" if done else "to run", particles=size["particles"],
                        steps=size.get("steps_expected", size["steps"]), engine_time_s=size["engine_time_s"],
-                       note="" if done or not s else "started before: resumes from its last restart point "
+                       note="" if done or not started else "started before: resumes from its last restart point "
                                                      "(`orchestrator status` says how far it got)")
         rows.append(row)
     return pd.DataFrame(rows, columns=["engine", "status", "particles", "steps", "engine_time_s", "note", "run_dir"]

@@ -236,6 +236,9 @@ def test_a_dry_run_lists_the_runs_their_estimates_and_what_is_reused(tmp_path):
     (done / "frames.h5").write_bytes(b"")
     again = ladder_plan(CASE, "dt_fraction", [0.2, 0.3, 1.0], engines=["liggghts"], runs_root=tmp_path, seeds=[7])
     assert list(again["status"]) == ["reused", "to run", "refused"] and "resumes" in again["note"].iloc[1]
+    (started / "summary.json").write_text('{"status": "unstable"}')     # reused as the ladder reuses it
+    assert ladder_plan(CASE, "dt_fraction", [0.3], engines=["liggghts"], runs_root=tmp_path,
+                       seeds=[7])["status"].tolist() == ["reused"]
     sw = sweep_plan(CASE, ["timestep.fraction=0.2,1.0"], engines=["liggghts"], runs_root=tmp_path)
     assert list(sw["timestep.fraction"]) == [0.2, 1.0] and list(sw["status"]) == ["reused", "refused"]
     # the CLI: the table and the total of the runs to do; 2 when every run is refused
