@@ -255,7 +255,7 @@ class Engine(ABC):
         full_env.update(env or {})
         full_env.setdefault("OMP_NUM_THREADS", str(case.engine_options.threads))
         t0 = time.perf_counter()
-        step = 0
+        step = first_step or 0              # a resumed run's lines start at its resume point, not at 0
         timed_out = False
         usage: list[float] = []             # the engine's CPU time [s], filled when it is reaped
         with open(log, "ab") as logf:
