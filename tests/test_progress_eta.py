@@ -3,6 +3,7 @@ start, and a run whose scene decides its length while it runs counts toward the 
 import re
 
 import engines.base as base
+from engines import get_engine
 
 #: "step 150,000/200,000 (75 %), 10.0 min, ETA 8.3 min" (or ".../~100,000 expected (at most 200,000) ...")
 LINE = re.compile(r"step ([\d,]+)/~?([\d,]+)(?: expected \(at most ([\d,]+)\))? \((\d+) %\), .*?"
@@ -62,3 +63,13 @@ def test_an_expected_count_at_the_budget_is_the_budget(capsys):
     base._Progress("run", total=200_000, expected=200_000)
     first = capsys.readouterr().err
     assert "200,000 steps;" in first and "expected" not in first
+
+
+def test_a_resumed_yade_triaxial_counts_from_its_checkpoint():
+    """YADE's checkpoint does not name its step, so the resume point's step is unknown until the
+    engine says it: the triaxial deck's ``RESUMED at iter N`` line is read as step N (the progress
+    lines and the attempt record start there, not at 0 or at the first PROGRESS line after it)."""
+    yade = get_engine("yade")
+    lines = ["RESUMED at iter 176000, stage 1", "ISO chunk 10: sigma1/p = 1.0007 sigma3/p = 1.0000",
+             "PROGRESS 176400", "176401 0.0038 1 1.9e-05"]
+    assert [yade.progress_step(l) for l in lines] == [176000, None, 176400, None]

@@ -23,7 +23,9 @@ from ..render import render_template
 from .numbers import yade_numbers, seed_term_ratios
 from .output import ChunkOutput, chunk_files, membrane_series
 
-_PROGRESS = re.compile(r"^PROGRESS (\d+)")
+#: the step counter the progress lines follow: the runtime's ``PROGRESS <iter>``, and the triaxial
+#: deck's ``RESUMED at iter <iter>`` (a resumed run's lines start there, not at 0)
+_PROGRESS = re.compile(r"^(?:PROGRESS|RESUMED at iter) (\d+)")
 #: the decks' Python (controllers, membrane, recorder, monitors), copied beside every script
 RUNTIME = Path(__file__).resolve().parents[1] / "yade_runtime"
 
