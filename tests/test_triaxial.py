@@ -390,11 +390,12 @@ def test_servo_loop_chatters_where_the_4000_clump_sample_did():
 def test_drag_ramp_is_the_rearrangement_time_under_the_drag():
     """The stage-1 drag falls linearly to zero over T = 18 nu/p (t_i^2/tau_d of a d50 grain: the
     sample's overdamped rearrangement time under the initial drag) times ``isotropic.drag_ramp``
-    (1 by default; the smoke case's 0.5), rounded up to whole chunks; drag_ramp: 0 switches it off
-    at once."""
+    (1 by default, as the smoke case since session 35; 0.5 halves it), rounded up to whole chunks;
+    drag_ramp: 0 switches it off at once."""
     import math
     from orchestrator.derive import derive
-    whole = derive(load_case(SMOKE, overrides={"scene": {"isotropic": {"drag_ramp": 1.0}}}))
+    assert load_case(SMOKE).scene.isotropic.drag_ramp == 1.0
+    whole = derive(load_case(SMOKE))
     iso, dt = whole["scene"]["iso"], whole["dt"]
     T = 18 * iso["drag_viscosity"] / 3e5                      # the smoke case's p = 300 kPa
     assert iso["drag_ramp_time"] == pytest.approx(T)
@@ -403,11 +404,9 @@ def test_drag_ramp_is_the_rearrangement_time_under_the_drag():
     t_i = d50 * math.sqrt(rho / p)
     tau_d = (rho * math.pi * d50 ** 3 / 6) / (6 * math.pi * iso["drag_viscosity"] * d50 / 2)
     assert iso["drag_ramp_time"] == pytest.approx(t_i ** 2 / tau_d)
-    case = load_case(SMOKE)
-    assert case.scene.isotropic.drag_ramp == 0.5
-    smoke = derive(case)["scene"]["iso"]
-    assert smoke["drag_ramp_time"] == pytest.approx(0.5 * T)
-    assert smoke["drag_ramp_steps"] % iso["chunk"] == 0 and 0 <= smoke["drag_ramp_steps"] * dt - 0.5 * T < iso["chunk"] * dt
+    half = derive(load_case(SMOKE, overrides={"scene": {"isotropic": {"drag_ramp": 0.5}}}))["scene"]["iso"]
+    assert half["drag_ramp_time"] == pytest.approx(0.5 * T)
+    assert half["drag_ramp_steps"] % iso["chunk"] == 0 and 0 <= half["drag_ramp_steps"] * dt - 0.5 * T < iso["chunk"] * dt
     n = iso["drag_ramp_steps"]
     assert n % iso["chunk"] == 0 and 0 <= n * dt - T < iso["chunk"] * dt
     off = derive(load_case(SMOKE, overrides={"scene": {"isotropic": {"drag_ramp": 0}}}))["scene"]["iso"]
