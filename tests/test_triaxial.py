@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 SMOKE = REPO / "cases" / "triaxial_smoke.yaml"
 ENGINES = ["liggghts", "yade"]
 #: expected minutes (tests/conftest.py schedule_groups: this file starts first)
-SCHEDULE_MINUTES = {"yade": 6, "liggghts": 2}
+SCHEDULE_MINUTES = {"yade": 9, "liggghts": 3}
 
 
 @pytest.fixture(scope="module")
