@@ -358,7 +358,6 @@ def test_servo_gain_below_its_stability_limit():
     integral's time constant is a tenth of a chunk."""
     from orchestrator.case import CaseError
     from orchestrator.derive import derive
-    from orchestrator.scenes import servo_loop
     iso = derive(load_case(SMOKE))["scene"]["iso"]
     assert iso["gain"] == pytest.approx(0.5 * iso["gain_limit"])
     assert 0.1 < iso["gain_limit"] < 50.0
