@@ -670,7 +670,7 @@ def planned_steps(table: dict, engine: str, key: str, budget: int, plan) -> tupl
 def _units_measured_elsewhere(table: dict, key: str, engine: str) -> tuple[str, float] | None:
     """(engine, units) of another engine's runs of exactly ``key`` whose step plan was measured:
     how many steps a scene takes to converge is the scene's physics (a clump sample's stage 1 took
-    9.7 pressure-ramp lengths on LIGGGHTS, the sphere samples' 2.5-4.2 on either engine), so an
+    9.7 pressure-ramp lengths on LIGGGHTS, the sphere samples' 2.5-4.5 on either engine), so an
     engine that has not run that variant yet counts its steps from the one that has, and its cost
     per step from its own nearest entry. The engine with the most such runs leads; None without."""
     found = [(tp.runs, e, tp.units) for e, entries in table.items() if e != engine and isinstance(entries, dict)
