@@ -82,7 +82,8 @@ def rdf(position: np.ndarray, r_max: float, bins: int = 100, container=None,
     Returns
     -------
     DataFrame: r [m] (bin centre), r_lo, r_hi, pairs (ordered pair count), g, g_err (Poisson
-    standard error of g from the pair count).
+    standard error of g from the pair count); g and g_err are NaN in a bin where no pair can be
+    expected (r beyond the container's extent).
     """
     p = np.asarray(position, float)
     p = p[present(p)]
@@ -105,6 +106,10 @@ def rdf(position: np.ndarray, r_max: float, bins: int = 100, container=None,
         g = counts / expected
         # ordered counts come in pairs: Poisson error of the unordered count, doubled
         err = 2.0 * np.sqrt(counts / 2.0) / expected
+    # a bin where no pair is expected (beyond the container's extent, where its set covariance is
+    # 0) has no g: NaN, not the inf of a count over zero
+    g[~(expected > 0)] = np.nan
+    err[~(expected > 0)] = np.nan
     return pd.DataFrame({"r": 0.5 * (lo + hi), "r_lo": lo, "r_hi": hi, "pairs": counts, "g": g, "g_err": err})
 
 

@@ -80,3 +80,16 @@ def test_fcc_first_peak_position():
     p = (cells[:, None, :] + base[None]).reshape(-1, 3) * a
     df = rdf(p, 1.2, 60)
     assert df["r"].iloc[df["g"].idxmax()] == pytest.approx(a / np.sqrt(2), abs=0.02)
+
+
+def test_g_is_undefined_beyond_the_container_not_infinite():
+    """Where the container's set covariance is 0 (a pair distance longer than any chord of it) no
+    pair is expected: g and g_err are NaN there, not the inf of a count over zero, and finite
+    wherever a pair is expected. The corners of a unit cube are √3 apart, the longest chord."""
+    L = 1e-3
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float) * L
+    g = rdf(corners, 2.0 * L, 20, Box([0, 0, 0], [L, L, L]), r_min=0.0)
+    beyond = g["r_lo"] >= np.sqrt(3) * L
+    assert beyond.any() and g.loc[beyond, ["g", "g_err"]].isna().all().all()
+    assert not np.isinf(g[["g", "g_err"]].to_numpy()).any()
+    assert np.isfinite(g.loc[g["r_hi"] <= 1.7 * L, "g"]).all()
