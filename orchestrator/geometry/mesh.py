@@ -233,6 +233,10 @@ def write_stl(mesh: Mesh, path, name: str = "solid", check: bool = True) -> Path
 def read_stl(path) -> Mesh:
     """Read an STL back (meshio merges coincident vertices)."""
     import meshio
-    m = meshio.read(str(path))
+    # meshio first tests for a binary STL by multiplying the header's triangle count, a numpy
+    # uint32, by 50; on an ASCII file (ours, LIGGGHTS' dumps) that count is text and the product
+    # overflows harmlessly before meshio reads the file as ASCII: no RuntimeWarning for it
+    with np.errstate(over="ignore"):
+        m = meshio.read(str(path))
     tri = np.vstack([c.data for c in m.cells if c.type == "triangle"])
     return Mesh(np.asarray(m.points, dtype=float), tri.astype(np.int64), [(0, len(tri))])
