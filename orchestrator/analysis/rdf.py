@@ -108,8 +108,9 @@ def rdf(position: np.ndarray, r_max: float, bins: int = 100, container=None,
         err = 2.0 * np.sqrt(counts / 2.0) / expected
     # a bin where no pair is expected (beyond the container's extent, where its set covariance is
     # 0) has no g: NaN, not the inf of a count over zero
-    g[~(expected > 0)] = np.nan
-    err[~(expected > 0)] = np.nan
+    none_expected = ~(expected > 0)
+    g[none_expected] = np.nan
+    err[none_expected] = np.nan
     return pd.DataFrame({"r": 0.5 * (lo + hi), "r_lo": lo, "r_hi": hi, "pairs": counts, "g": g, "g_err": err})
 
 
