@@ -277,7 +277,7 @@ class Engine(ABC):
                     if not events:
                         if _reap(proc, 0.0, usage):
                             break
-                        bar.update(step)            # a quiet engine (setup, a long stage) still gets its lines
+                        bar.update(step, reported=False)   # a quiet engine (setup, a long stage) still gets its lines
                         attempt.update(step, proc.pid)
                         continue
                     chunk = os.read(proc.stdout.fileno(), 65536)
@@ -433,12 +433,14 @@ class _Progress:
         passes them, then the budget."""
         return self.expected if self.expected and step <= self.expected else self.total
 
-    def update(self, step: int):
+    def update(self, step: int, reported: bool = True):
+        """Show ``step``; ``reported``: the engine has just said it (False: the lines go on while the
+        engine is quiet, e.g. loading a resumed run's checkpoint, which the step rate must not count)."""
         if self.p is not None:
             self.p.update(self.task, completed=step, total=self.goal(step))
         elif self.lines:
             now = time.perf_counter()
-            if self.first is None and step > 0:   # the first report (a resumed run starts late)
+            if self.first is None and reported and step > 0:   # the first report (a resumed run starts late)
                 self.first = (now, step)
                 self.samples.append(self.first)
             if now >= self.next:

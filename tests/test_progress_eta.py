@@ -73,3 +73,28 @@ def test_a_resumed_yade_triaxial_counts_from_its_checkpoint():
     lines = ["RESUMED at iter 176000, stage 1", "ISO chunk 10: sigma1/p = 1.0007 sigma3/p = 1.0000",
              "PROGRESS 176400", "176401 0.0038 1 1.9e-05"]
     assert [yade.progress_step(l) for l in lines] == [176000, None, 176400, None]
+
+
+def test_a_resumed_run_loading_its_checkpoint_does_not_slow_its_eta(monkeypatch, capsys):
+    """A resumed run shows its resume step while the engine loads its checkpoint (60 s here, no
+    report), then reports 100 steps/s: the ETA follows those 100 steps/s, not a rate diluted by the
+    loading."""
+    clock = [0.0]
+    monkeypatch.setattr(base.time, "perf_counter", lambda: clock[0])
+    p = base._Progress("run", total=400_000)
+    for t in range(60):                                  # loading: the lines go on at the resume step
+        clock[0] = float(t)
+        p.update(176_000, reported=False)
+    step = 176_000
+    for t in range(60, 300):
+        clock[0] = float(t)
+        step += 100
+        p.update(step)
+    lines = [LINE.search(l) for l in capsys.readouterr().err.strip().splitlines()[1:]]
+    assert lines[0] and int(lines[0].group(1).replace(",", "")) == 176_000       # not "step 0"
+    moving = [m for m in lines if int(m.group(1).replace(",", "")) > 176_000 and m.group(5)]
+    assert len(moving) >= 5
+    for m in moving:                                     # from the first line after the reports began
+        s = int(m.group(1).replace(",", ""))
+        eta = float(m.group(5)) * SECONDS[m.group(6)]
+        assert abs(eta - (400_000 - s) / 100) / ((400_000 - s) / 100) < 0.05, (s, eta)
