@@ -32,7 +32,7 @@ import yaml
 
 from .attempts import run_cost
 from .clock import run_engine_seconds
-from .scenes.shear_cell import COMPRESSION_TOLERANCE
+from .scenes.shear_cell import COMPRESSION_TOLERANCE, compression_advice
 
 __all__ = ["KeyResult", "key_results", "format_measure", "results_frame"]
 
@@ -105,7 +105,7 @@ def _x50(case: dict) -> float | None:
     return None
 
 
-def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict) -> list[KeyResult]:
+def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict, summary: dict) -> list[KeyResult]:
     rows = []
     lab = _label(asum, "friction")
     if lab:
@@ -153,7 +153,10 @@ def _shear_cell(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict)
             if isinstance(v, dict) and v.get("relative_error") is not None:
                 e = float(v["relative_error"])
                 rows.append(KeyResult(f"servo force vs target at the end of {k.replace('_', ' ')} (|e| ≤ 2 %)",
-                                      float(f"{e * 100:.2g}"), "%", None, "", "", ok=abs(e) <= COMPRESSION_TOLERANCE))
+                                      float(f"{e * 100:.2g}"), "%", None, "",
+                                      compression_advice(e, case.get("scene"), summary.get("case_source") or "")
+                                      if k == "compression" else "",
+                                      ok=abs(e) <= COMPRESSION_TOLERANCE))
     return rows
 
 
@@ -214,7 +217,7 @@ def key_results(run_dir) -> list[KeyResult]:
     kind = ((case.get("scene") or {}).get("kind")) or ""
     rows: list[KeyResult] = []
     if kind == "shear_cell":
-        rows += _shear_cell(run_dir, adir, asum, params, case)
+        rows += _shear_cell(run_dir, adir, asum, params, case, summary)
     elif kind == "triaxial":
         rows += _triaxial(run_dir, adir, asum, params, case, summary)
     subs = summary.get("substitutions") or []

@@ -9,6 +9,7 @@ import pytest
 import pandas as pd
 import yaml
 
+from orchestrator.registry import get_scene
 from orchestrator.results import format_measure, key_results, results_frame
 
 
@@ -173,3 +174,28 @@ def test_a_run_outcome_shows_itself_in_one_line_and_its_results_in_a_notebook(tm
     assert "<table" in page and "substitutions" in page and "range" not in page and "99" not in page
     assert list(out.results.columns[:2]) == ["quantity", "text"]
     assert "<table" not in RunOutcome(tmp_path / "none", "failed", {})._repr_html_()
+
+
+def test_a_missed_compression_says_which_case_field_fixes_it(tmp_path):
+    """A compression that ended off its load names the case file, the field and its value: below the
+    target (the column still collapsing when the stage's fixed length ran out) the stage's length,
+    above it (the piston overshot) the piston's speed."""
+    run = _fake_shear_cell_run(tmp_path)
+    (run / "case.yaml").write_text(yaml.safe_dump({"name": "x", "scene": {"kind": "shear_cell",
+                                                                          "travel_time_factor": 1.5}}))
+    summary = json.loads((run / "summary.json").read_text())
+    (run / "summary.json").write_text(json.dumps({**summary, "case_source": "/cases/mine.yaml"}))
+    scene = get_scene("shear_cell")
+
+    def row_and_problem(err):
+        (run / "shear_cell_checks.json").write_text(json.dumps({"compression": {"relative_error": err}}))
+        row = next(r for r in key_results(run) if r.quantity.startswith("servo force vs target"))
+        return row, scene.sample_problems(run)
+
+    row, problems = row_and_problem(-0.82)
+    assert row.ok is False and "scene.travel_time_factor in /cases/mine.yaml (now 1.5)" in row.seed
+    assert len(problems) == 1 and problems[0].startswith("compression ended -82.0 %") and row.seed in problems[0]
+    row, problems = row_and_problem(0.55)
+    assert row.ok is False and "scene.compression_inertial_number in /cases/mine.yaml (now 0.001)" in row.seed
+    row, problems = row_and_problem(0.011)
+    assert row.ok is True and row.seed == "" and problems == []

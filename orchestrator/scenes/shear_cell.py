@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import yaml
 from pydantic import Field, field_validator, model_validator
 
 from ..atomic import write_json
@@ -194,7 +195,7 @@ def geometry_numbers(case) -> dict:
             raise DerivationError("scene.fill_height gives fewer than 2 particles; raise it or set n_particles")
     # loose packing between the vane tips
     L_loose = n * v_mean / (s.loose_fraction * math.pi * R ** 2)
-    r_min, r_max = s.psd.d_min / 2, s.psd.d_max / 2
+    r_min = s.psd.d_min / 2
     margin = s.psd.d_max
     z_pack_lo = s.vane_height + 0.5 * margin
     z_pack_hi = z_pack_lo + L_loose
@@ -548,6 +549,52 @@ def _frame_controls(params, steps) -> dict:
 COMPRESSION_TOLERANCE = 0.02
 
 
+def compression_advice(relative_error: float | None, scene: dict | None = None, case_file: str = "") -> str:
+    """What a compression check's error says about the run and the case field that fixes it; ""
+    within :data:`COMPRESSION_TOLERANCE`.
+
+    ``relative_error`` is (mean piston force − target)/target over the stage's last averaging
+    window [-]; ``scene`` the case's ``scene`` section (its current values are quoted); ``case_file``
+    the case file the run came from (the run's ``summary.json`` → ``case_source``).
+
+    - Below the target: the piston had not reached the load when the stage's fixed length ran out,
+      the column still collapsing (the smoke cell's second packing: -82 % on LAMMPS, -37 % on YADE
+      at ``travel_time_factor`` 1.5, both within 2 % at 2; docs/shear_cell.md): lengthen the stage.
+    - Above it: the piston pushed past the load faster than the servo could stop it (YADE's small
+      cell at 4x the compression rate: +55 %; docs/validation.md): a slower piston.
+    """
+    if relative_error is None or abs(relative_error) <= COMPRESSION_TOLERANCE:
+        return ""
+    scene = scene or {}
+    where = f" in {case_file}" if case_file else ""
+
+    def now(field, default):
+        return f"{field}{where} (now {scene.get(field, default)})"
+
+    if relative_error < 0:
+        return (f"the piston had not reached the load when the stage ended (the column still collapsing): "
+                f"raise scene.{now('travel_time_factor', Scene.model_fields['travel_time_factor'].default)}, "
+                f"e.g. to 2, and run again")
+    return (f"the piston overshot the load (the servo could not stop it at its speed): lower "
+            f"scene.{now('compression_inertial_number', Scene.model_fields['compression_inertial_number'].default)}"
+            f" and run again")
+
+
+def _case_scene(run_dir) -> tuple[dict, str]:
+    """The ``scene`` section of the run's resolved ``case.yaml`` ({} when unreadable) and the case
+    file the run came from (``summary.json`` → ``case_source``; "" when unknown)."""
+    run_dir = Path(run_dir)
+    try:
+        scene = (yaml.safe_load((run_dir / "case.yaml").read_text()) or {}).get("scene") or {}
+    except (OSError, ValueError, AttributeError):
+        scene = {}
+    try:
+        source = json.loads((run_dir / "summary.json").read_text()).get("case_source") or ""
+    except (OSError, ValueError, AttributeError):
+        source = ""
+    return scene, str(source)
+
+
 def _compression_check(params, time, step, force_z) -> dict:
     sc = params["scene"]
     a, b = sc["stages"]["compress"]
@@ -648,7 +695,8 @@ class ShearCellScene(base.Scene):
     def sample_problems(self, run_dir):
         """The compression stage missed the load: the piston's mean force over the stage's last
         averaging window more than :data:`COMPRESSION_TOLERANCE` off the target
-        (``shear_cell_checks.json``)."""
+        (``shear_cell_checks.json``), with the case field that fixes it
+        (:func:`compression_advice`)."""
         try:
             chk = json.loads((Path(run_dir) / "shear_cell_checks.json").read_text())["compression"]
         except (OSError, ValueError, KeyError):
@@ -656,7 +704,9 @@ class ShearCellScene(base.Scene):
         e = chk.get("relative_error")
         if e is None or abs(e) <= COMPRESSION_TOLERANCE:
             return []
-        return [f"compression ended {100 * e:+.1f} % off the target load (tolerance ± {100 * COMPRESSION_TOLERANCE:g} %)"]
+        advice = compression_advice(e, *_case_scene(run_dir))
+        return [f"compression ended {100 * e:+.1f} % off the target load (tolerance ± {100 * COMPRESSION_TOLERANCE:g} %)"
+                + (f": {advice}" if advice else "")]
 
     def post(self, run_dir, params, output):
         """Wall series from the sampler's rows and the per-frame ``angle``/``stage`` controls of
