@@ -171,7 +171,7 @@ def cmd_report(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    from .measures import MEASURES
+    from .measure_names import MEASURES
     c = sub.add_parser("compare", help="compare two runs or CT frame sets (any mix): table (CSV) and HTML report")
     c.add_argument("a", help="run directory or frames.h5 (A, the reference)")
     c.add_argument("b", help="run directory or frames.h5 (B)")

@@ -33,11 +33,10 @@ import numpy as np
 from ..analysis import ANALYSES
 from ..analysis.plots import _fig
 from .distances import Distance, ks, l2, rel_error
+from .measure_names import MEASURES
 
 __all__ = ["MEASURES", "MeasureOutcome", "compute_measures"]
 
-MEASURES = ("profiles", "shearband", "displacements", "d2min", "clusters", "coordination", "fabric", "rdf",
-            "friction", "macro")
 MM = 1e3
 
 

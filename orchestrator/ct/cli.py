@@ -21,11 +21,26 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..case import load_case
-from .case_run import run_ct_case
-from .commands import segment_main, shapes_main, synth_main, track_main
-
 __all__ = ["add_ct_parser", "run_main", "main", "synth_main", "segment_main", "track_main", "shapes_main"]
+
+#: the sub-commands' handlers in :mod:`.commands`, imported when one runs (the parser alone, built for
+#: ``orchestrator --help``, then loads no imaging stack)
+_HANDLERS = ("synth_main", "segment_main", "track_main", "shapes_main")
+
+
+def _deferred(name):
+    def handler(args):
+        from . import commands
+        return getattr(commands, name)(args)
+    handler.__name__ = name
+    return handler
+
+
+def __getattr__(name):
+    if name in _HANDLERS:
+        from . import commands
+        return getattr(commands, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def add_ct_parser(subparsers) -> argparse.ArgumentParser:
@@ -45,7 +60,7 @@ def add_ct_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--drift", type=float, default=0.0, help="relative contrast drift bottom->top")
     p.add_argument("--hollow", type=float, default=0.0, help="fraction of grains made hollow")
     p.add_argument("--seed", type=int, default=0)
-    p.set_defaults(func=synth_main)
+    p.set_defaults(func=_deferred("synth_main"))
 
     p = sub.add_parser("segment", help="segment scans into grains (grain tables, contacts, SH invariants)")
     p.add_argument("scans", nargs="+", help="scan files (TIFF, directory of slices, .npy, raw)")
@@ -58,7 +73,7 @@ def add_ct_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-shape", action="store_true", help="skip the SH expansion")
     p.add_argument("--degree", type=int, default=15, help="SH degree")
     p.add_argument("--labels", action="store_true", help="also write the label volume")
-    p.set_defaults(func=segment_main)
+    p.set_defaults(func=_deferred("segment_main"))
 
     p = sub.add_parser("track", help="track grains across scans and write frames.h5")
     p.add_argument("segdir", help="output directory of `ct segment`")
@@ -68,7 +83,7 @@ def add_ct_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scans", nargs="*", help="the scans (needed by --method rotation), same order")
     p.add_argument("--voxel-size", help="voxel edge for scans that lack it")
     p.add_argument("--rings", type=int, default=4, help="rings of equal area (rotation method)")
-    p.set_defaults(func=track_main)
+    p.set_defaults(func=_deferred("track_main"))
 
     p = sub.add_parser("run", help="segment and track the scan series of a case's ct: section")
     p.add_argument("case", help="case YAML with a ct: section")
@@ -89,11 +104,13 @@ def add_ct_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--dtype", help="raw volume: dtype (uint8, uint16, float32 ...)")
     p.add_argument("--sigma", type=float, default=1.0, help="Gaussian filter sigma [voxels] of the segmentation")
     p.add_argument("--h", help='marker height of the segmentation, e.g. "2 um" (default: segment\'s)')
-    p.set_defaults(func=shapes_main)
+    p.set_defaults(func=_deferred("shapes_main"))
     return ct
 
 
 def run_main(args) -> int:
+    from ..case import load_case
+    from .case_run import run_ct_case
     case = load_case(args.case)
     out = run_ct_case(case, args.runs, force=args.force)
     print(f"ct frames: {out}")
