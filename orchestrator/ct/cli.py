@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["add_ct_parser", "run_main", "main", "synth_main", "segment_main", "track_main", "shapes_main"]
+__all__ = ["add_ct_parser", "run_main", "main"]   # the *_main handlers: orchestrator.ct.commands
 
 #: the sub-commands' handlers in :mod:`.commands`, imported when one runs (the parser alone, built for
 #: ``orchestrator --help``, then loads no imaging stack)
