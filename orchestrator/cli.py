@@ -384,17 +384,23 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_engines)
 
     ck = sub.add_parser("clock", help="the run-time model: show it, or refit it from complete runs")
-    ck.add_argument("action", choices=["show", "refresh"])
-    ck.add_argument("runs", nargs="*", default=["runs"], help="run directories or runs/ trees (refresh)")
-    ck.add_argument("--package", action="store_true",
-                    help="write the shipped table benchmarks/throughput.json (in a checkout) instead of the user table")
-    ck.add_argument("--steps-only", action="store_true",
-                    help="refresh only how many steps the runs took (the same on every machine), keeping the "
-                         "table's costs per step (fitted on its own machine)")
-    ck.add_argument("--add", action="store_true",
-                    help="fit the runs given together with the runs each entry was fitted on before (kept in the "
-                         "table), rather than in their place")
-    ck.set_defaults(func=cmd_clock)
+    # show and refresh as sub-commands, so that refresh's options may stand before or after its runs
+    # (one positional list after a choice made argparse drop "refresh --add RUNS")
+    ck_sub = ck.add_subparsers(dest="action", required=True, metavar="{show,refresh}")
+    ck_sub.add_parser("show", help="the table in use, entry by entry").set_defaults(func=cmd_clock, runs=[],
+                                                                                      package=False,
+                                                                                      steps_only=False, add=False)
+    ckr = ck_sub.add_parser("refresh", help="refit the table from complete runs")
+    ckr.add_argument("runs", nargs="*", default=["runs"], help="run directories or runs/ trees")
+    ckr.add_argument("--package", action="store_true",
+                     help="write the shipped table benchmarks/throughput.json (in a checkout) instead of the user table")
+    ckr.add_argument("--steps-only", action="store_true",
+                     help="refresh only how many steps the runs took (the same on every machine), keeping the "
+                          "table's costs per step (fitted on its own machine)")
+    ckr.add_argument("--add", action="store_true",
+                     help="fit the runs given together with the runs each entry was fitted on before (kept in the "
+                          "table), rather than in their place")
+    ckr.set_defaults(func=cmd_clock)
 
     vf = sub.add_parser("verify", help="contact-level verification against Hertz (Chung & Ooi 2011 tests 1-4)")
     vf.add_argument("--engine", choices=[*engine_names(), "all"], default="all")

@@ -711,3 +711,18 @@ def test_a_runs_recorded_estimate_is_the_dry_runs_figure(tmp_path, monkeypatch):
     assert "× 0.50 for this machine's speed" in dry["engine_time_basis"]
     seconds, steps = run_estimate(case, params, "yade")
     assert seconds == pytest.approx(dry["engine_time_s"]) and steps == dry["steps_expected"]
+
+
+def test_clock_refresh_takes_its_options_before_or_after_the_runs():
+    """``orchestrator clock refresh --add RUNS`` (the form docs/validation.md gives) once stopped at
+    "unrecognized arguments: RUNS": the runs list after a choice took nothing once an option stood
+    between them. show and refresh are sub-commands now; both orders parse alike."""
+    from orchestrator.cli import build_parser
+    for argv in (["clock", "refresh", "--add", "r1", "r2"], ["clock", "refresh", "r1", "r2", "--add"],
+                 ["clock", "refresh", "--package", "--steps-only", "r1", "r2"]):
+        args = build_parser(argv).parse_args(argv)
+        assert args.action == "refresh" and args.runs == ["r1", "r2"], argv
+    args = build_parser(["clock", "refresh"]).parse_args(["clock", "refresh"])
+    assert args.runs == ["runs"] and not args.add
+    args = build_parser(["clock", "show"]).parse_args(["clock", "show"])
+    assert args.action == "show" and args.func.__name__ == "cmd_clock"
