@@ -17,8 +17,8 @@ figure once it is reaped. ``load`` is the machine's one-minute load average, ave
 samples taken at each write (the attempt's own ranks included), beside the machine's ``cores``: a
 run whose ``load`` exceeds its ``cores`` shared the machine, and its wall time is longer than a
 quiet machine's (``benchmarks/bench_estimate.py`` marks it). ``recent`` holds the steps, wall and CPU
-time of the attempt's latest :attr:`AttemptRecord.WINDOW` seconds (10 min): the pace now, which
-``orchestrator status`` divides the steps left by (a run slows as a shear cell's sample densifies; a
+time of the attempt's latest :attr:`AttemptRecord.WINDOW` seconds (10 min), from the first report
+of one step to that of another: the pace now, which ``orchestrator status`` divides the steps left by (a run slows as a shear cell's sample densifies; a
 stretch that shared the machine or was paused with SIGSTOP weighs on it for one window, not for the
 rest of the attempt). A fresh start clears the file.
 
@@ -138,16 +138,27 @@ class AttemptRecord:
         self._write()
 
     def _note_recent(self) -> None:
-        """Keep the samples of the latest WINDOW seconds (and the one just before) and record the
-        steps, wall and CPU time between the oldest and this one as ``recent``."""
+        """Record the steps, wall and CPU time between the first reports of two steps, the latest
+        WINDOW seconds of them (and the one just before), as ``recent``; a run with no new step for
+        a whole WINDOW records 0 steps over the time since its last one (stalled or paused).
+
+        The samples are taken when a step is first reported, not at every write: an engine that
+        reports sparsely (YADE's triaxial on the medium clumps: every 5 040 steps, ~7 min of CPU) put
+        a window of writes around one report or two, and its pace read 12 or 31 steps per CPU
+        second from the same steady run."""
         e = self.entry
         if e["last_step"] is None:
             return
-        self._samples.append((e["wall_s"], e["last_step"], e["cpu_s"]))
+        sample = (e["wall_s"], e["last_step"], e["cpu_s"])
+        if not self._samples or sample[1] != self._samples[-1][1]:
+            self._samples.append(sample)            # the moment this step was first reported
         while len(self._samples) > 2 and self._samples[-1][0] - self._samples[1][0] >= self.WINDOW:
             self._samples.popleft()
         (w0, s0, c0), (w1, s1, c1) = self._samples[0], self._samples[-1]
-        if len(self._samples) > 1:          # 0 steps when the engine stalled: status then paces by the attempt
+        if sample[0] - w1 >= self.WINDOW:           # no new step for a window: status paces by the attempt
+            e["recent"] = {"steps": 0, "wall_s": round(sample[0] - w1, 3),
+                           "cpu_s": None if c1 is None or sample[2] is None else round(sample[2] - c1, 3)}
+        elif len(self._samples) > 1:
             e["recent"] = {"steps": s1 - s0, "wall_s": round(w1 - w0, 3),
                            "cpu_s": None if c0 is None or c1 is None else round(c1 - c0, 3)}
 

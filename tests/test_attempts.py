@@ -104,7 +104,27 @@ def test_the_recent_pace_spans_the_latest_window(tmp_path, monkeypatch):
         rec.update(step)
     assert read_attempts(tmp_path)[0]["recent"]["steps"] == 0
     rec.close(7000, None, done=False)
-    assert read_attempts(tmp_path)[0]["recent"] == {"steps": 0, "wall_s": 100.0, "cpu_s": None}
+    assert read_attempts(tmp_path)[0]["recent"] == {"steps": 0, "wall_s": 200.0, "cpu_s": None}
+
+
+def test_the_recent_pace_of_an_engine_that_reports_sparsely(tmp_path, monkeypatch):
+    """An engine reports its step every 400 s at a steady 10 steps/s (YADE's triaxial on the medium
+    clumps: every 5 040 steps) while the record is written every 10 s: the recent pace is 10 steps/s
+    wherever the window falls, not 4 000 steps over a window of writes around one report (6.7) or
+    8 000 around two (13)."""
+    now = [0.0]
+    monkeypatch.setattr(AttemptRecord, "clock", staticmethod(lambda: now[0]))
+    monkeypatch.setattr(AttemptRecord, "EVERY", 10.0)
+    monkeypatch.setattr(AttemptRecord, "WINDOW", 600.0)
+    rec = AttemptRecord(tmp_path, 0)
+    paces = []
+    for t in range(10, 4001, 10):
+        now[0] = float(t)
+        rec.update(4000 * (t // 400))
+        r = read_attempts(tmp_path)[0].get("recent")
+        if t >= 1200 and r:
+            paces.append(r["steps"] / r["wall_s"])
+    assert paces and all(p == 10.0 for p in paces)
 
 
 def _umask() -> int:
