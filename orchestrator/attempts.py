@@ -18,9 +18,9 @@ samples taken at each write (the attempt's own ranks included), beside the machi
 run whose ``load`` exceeds its ``cores`` shared the machine, and its wall time is longer than a
 quiet machine's (``benchmarks/bench_estimate.py`` marks it). ``recent`` holds the steps, wall and CPU
 time of the attempt's latest :attr:`AttemptRecord.WINDOW` seconds (10 min), from the first report
-of one step to that of another: the pace now, which ``orchestrator status`` divides the steps left by (a run slows as a shear cell's sample densifies; a
-stretch that shared the machine or was paused with SIGSTOP weighs on it for one window, not for the
-rest of the attempt). A fresh start clears the file.
+of one step to that of another: the pace now, which ``orchestrator status`` divides the steps left
+by (a run slows as a shear cell's sample densifies; a stretch that shared the machine or was paused
+with SIGSTOP weighs on it for one window, not for the rest of the attempt). A fresh start clears the file.
 
 :func:`run_cost` turns the record into the engine time an uninterrupted run would have taken: each
 attempt's time scaled by the share of its steps that were new (a resume repeats the steps since the
