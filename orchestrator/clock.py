@@ -212,7 +212,7 @@ class RunSample:
     def quiet(self) -> bool:
         """Nothing else ran beside it: its mean load at most its own ranks and half a core (True
         when the load was not recorded). A one-rank run's CPU time beside another run is longer too,
-        by 8-36 %, and by 2x for two YADE runs side by side (docs/validation.md), so the machine's
+        by 8-36 %, and up to 2x for two YADE runs side by side (docs/validation.md), so the machine's
         speed prefers quiet runs (:func:`speed_factor`)."""
         return self.load is None or self.load <= self.ranks + 0.5
 

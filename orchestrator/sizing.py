@@ -182,7 +182,7 @@ def busy_note(workers: int = 1, busy: float | None = None, cores: int | None = N
         return None
     return (f"note: this machine is busy ({busy:.1f} of its {cores} cores in use, the run adds {workers}): the "
             f"estimate is for a quiet machine, and sharing the cores makes the run slower (one rank: 8-36 % more "
-            f"CPU time measured here, twice as much for two YADE runs; several ranks: several times the wall time)")
+            f"CPU time measured here, up to twice as much for two YADE runs; several ranks: several times the wall time)")
 
 
 def check_fits(case, size: dict, force: bool = False) -> list[str]:
