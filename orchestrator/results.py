@@ -33,6 +33,7 @@ import yaml
 from .attempts import run_cost
 from .clock import run_engine_seconds
 from .scenes.shear_cell import COMPRESSION_TOLERANCE, compression_advice
+from .scenes.triaxial import stage1_advice
 
 __all__ = ["KeyResult", "key_results", "format_measure", "results_frame"]
 
@@ -181,6 +182,8 @@ def _triaxial(run_dir: Path, adir: Path, asum: dict, params: dict, case: dict, s
         rows.append(KeyResult("stage 1 at p when loading began: σ1/p, σ3/p" + (f" (within {tol:g})" if tol else ""),
                               f"{iso['sigma1_error'] + 1:.3f}, {iso.get('sigma3_error', float('nan')) + 1:.3f}"
                               + ("" if iso["converged"] else ": unconverged, loading began from this state"),
+                              seed="" if iso["converged"] else stage1_advice(case.get("scene"),
+                                                                             summary.get("case_source") or ""),
                               ok=iso["converged"]))
     e = iso.get("void_ratio") or {}
     if isinstance(e.get("interior"), (int, float)):

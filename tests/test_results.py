@@ -199,3 +199,23 @@ def test_a_missed_compression_says_which_case_field_fixes_it(tmp_path):
     assert row.ok is False and "scene.compression_inertial_number in /cases/mine.yaml (now 0.001)" in row.seed
     row, problems = row_and_problem(0.011)
     assert row.ok is True and row.seed == "" and problems == []
+
+
+def test_an_unconverged_stage_1_says_which_case_field_fixes_it(tmp_path):
+    """The triaxial's stage-1 row, when the loading began unconverged, names the chunk budget (and the
+    servo's speed) in the case file with their values; converged, it says nothing more."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "case.yaml").write_text(yaml.safe_dump({"name": "t", "scene": {"kind": "triaxial",
+                                                                          "isotropic": {"max_chunks": 12}}}))
+    (run / "params.json").write_text(json.dumps({"scene": {"iso": {"tolerance": 0.01}}}))
+    iso = {"converged": False, "sigma1_error": -0.02, "sigma3_error": 0.004}
+    (run / "summary.json").write_text(json.dumps({"status": "complete", "case_source": "/c/tri.yaml",
+                                                  "scene": {"isotropic_end": iso}}))
+    row = next(r for r in key_results(run) if r.quantity.startswith("stage 1 at p"))
+    assert row.ok is False and row.value.startswith("0.980, 1.004: unconverged")
+    assert "scene.isotropic.max_chunks in /c/tri.yaml (now 12)" in row.seed
+    iso["converged"] = True
+    (run / "summary.json").write_text(json.dumps({"status": "complete", "scene": {"isotropic_end": iso}}))
+    row = next(r for r in key_results(run) if r.quantity.startswith("stage 1 at p"))
+    assert row.ok is True and row.seed == ""

@@ -13,12 +13,14 @@ silently (docs/architecture.md).
 from __future__ import annotations
 
 import math
+import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Mapping, Protocol
 
 import numpy as np
+import yaml
 
 from ..params import Params, ScenePart, StabilityInputs
 from ..particles_io import write_particle_table
@@ -228,3 +230,19 @@ class Scene(ABC):
 
 def _scenes_honouring(term: str) -> list[str]:
     return [k for k in scene_kinds() if term in get_scene(k).honoured]
+
+
+def run_case_scene(run_dir) -> tuple[dict, str]:
+    """The ``scene`` section of a run's resolved ``case.yaml`` ({} when unreadable) and the case
+    file the run came from (``summary.json`` → ``case_source``; "" when unknown): what a sample
+    check quotes when it names the case field that fixes a run."""
+    run_dir = Path(run_dir)
+    try:
+        scene = (yaml.safe_load((run_dir / "case.yaml").read_text()) or {}).get("scene") or {}
+    except (OSError, ValueError, AttributeError):
+        scene = {}
+    try:
+        source = json.loads((run_dir / "summary.json").read_text()).get("case_source") or ""
+    except (OSError, ValueError, AttributeError):
+        source = ""
+    return scene, str(source)

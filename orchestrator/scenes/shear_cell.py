@@ -35,7 +35,6 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import yaml
 from pydantic import Field, field_validator, model_validator
 
 from ..atomic import write_json
@@ -580,21 +579,6 @@ def compression_advice(relative_error: float | None, scene: dict | None = None, 
             f" and run again")
 
 
-def _case_scene(run_dir) -> tuple[dict, str]:
-    """The ``scene`` section of the run's resolved ``case.yaml`` ({} when unreadable) and the case
-    file the run came from (``summary.json`` → ``case_source``; "" when unknown)."""
-    run_dir = Path(run_dir)
-    try:
-        scene = (yaml.safe_load((run_dir / "case.yaml").read_text()) or {}).get("scene") or {}
-    except (OSError, ValueError, AttributeError):
-        scene = {}
-    try:
-        source = json.loads((run_dir / "summary.json").read_text()).get("case_source") or ""
-    except (OSError, ValueError, AttributeError):
-        source = ""
-    return scene, str(source)
-
-
 def _compression_check(params, time, step, force_z) -> dict:
     sc = params["scene"]
     a, b = sc["stages"]["compress"]
@@ -704,7 +688,7 @@ class ShearCellScene(base.Scene):
         e = chk.get("relative_error")
         if e is None or abs(e) <= COMPRESSION_TOLERANCE:
             return []
-        advice = compression_advice(e, *_case_scene(run_dir))
+        advice = compression_advice(e, *base.run_case_scene(run_dir))
         return [f"compression ended {100 * e:+.1f} % off the target load (tolerance ± {100 * COMPRESSION_TOLERANCE:g} %)"
                 + (f": {advice}" if advice else "")]
 

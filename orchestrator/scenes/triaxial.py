@@ -529,7 +529,24 @@ def stage1_problems(run_dir: Path) -> list[str]:
     if iso.get("converged") is not False:
         return []
     return [f"stage 1 ended unconverged: σ1/p = {iso.get('sigma1_error', math.nan) + 1:.3f}, "
-            f"σ3/p = {iso.get('sigma3_error', math.nan) + 1:.3f} (tolerance {tol:g}) when loading began"]
+            f"σ3/p = {iso.get('sigma3_error', math.nan) + 1:.3f} (tolerance {tol:g}) when loading began: "
+            + stage1_advice(*base.run_case_scene(run_dir))]
+
+
+def stage1_advice(scene: dict | None = None, case_file: str = "") -> str:
+    """The case field that lets an unconverged stage 1 converge: its chunk budget
+    (``scene.isotropic.max_chunks``, the value in ``scene`` quoted), or a slower servo
+    (``isotropic.inertial_number``) where the stresses swing about p rather than creep toward it
+    (YADE's PFacet membrane at 2 000 grains: σ1/p between 0.77 and 1.27 over seven chunks,
+    docs/validation.md)."""
+    iso = (scene or {}).get("isotropic") or {}
+    where = f" in {case_file}" if case_file else ""
+
+    def now(field):
+        return f"{field}{where} (now {iso.get(field, Isotropic.model_fields[field].default)})"
+
+    return (f"raise scene.isotropic.{now('max_chunks')} so that the stresses can settle before the loading, "
+            f"or, where they swing about p, lower scene.isotropic.{now('inertial_number')}")
 
 
 def step_plan(scene_params) -> base.StepPlan:

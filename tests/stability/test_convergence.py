@@ -96,9 +96,13 @@ def test_the_triaxial_and_shear_cell_read_their_own_sample_checks(tmp_path):
     tri.mkdir(), cell.mkdir()
     (tri / "params.json").write_text(json.dumps({"scene": {"iso": {"tolerance": 0.01}}}))
     iso = {"converged": False, "sigma1_error": -0.015, "sigma3_error": 0.0}
-    (tri / "summary.json").write_text(json.dumps({"scene": {"isotropic_end": iso}}))
+    (tri / "summary.json").write_text(json.dumps({"scene": {"isotropic_end": iso}, "case_source": "/c/t.yaml"}))
+    (tri / "case.yaml").write_text("scene: {kind: triaxial, isotropic: {max_chunks: 20}}\n")
     (msg,) = get_scene("triaxial").sample_problems(tri)
     assert "unconverged" in msg and "0.985" in msg
+    # the case field that fixes it, with the file and its value (the default where the case is silent)
+    assert "scene.isotropic.max_chunks in /c/t.yaml (now 20)" in msg
+    assert "scene.isotropic.inertial_number in /c/t.yaml (now 0.001)" in msg
     iso["converged"] = True
     (tri / "summary.json").write_text(json.dumps({"scene": {"isotropic_end": iso}}))
     assert get_scene("triaxial").sample_problems(tri) == []
