@@ -439,7 +439,7 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
         pass
     # further command groups register themselves: a module with add_parsers(subparsers)
     import importlib
-    for name in ("orchestrator.compare.cli", "orchestrator.stability.cli"):
+    for name in ("orchestrator.cli_compare", "orchestrator.stability.cli"):
         try:
             mod = importlib.import_module(name)
         except ModuleNotFoundError as exc:

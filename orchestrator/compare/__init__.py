@@ -12,26 +12,14 @@ See docs/compare.md. Modules: :mod:`.align` (states, coordinates, identity), :mo
 (grain-by-grain errors), :mod:`.crossval`, :mod:`.report` (HTML), :mod:`.browser` (headless
 Chromium check of a page).
 """
-from importlib import import_module
+from .align import Alignment, Source, align, match_identity, match_states, open_source
+from .core import Comparison, compare
+from .crossval import CrossValidation, crossval
+from .distances import ks, l2, rel_error
+from .grain import GrainComparison, grain_errors
+from .measures import MEASURES
+from .report import run_checks, write_compare_report, write_run_report
 
-#: where each public name lives; imported on first use (PEP 562), so that ``orchestrator --help``
-#: and the CLI's command table need not load the analysis stack behind :mod:`.measures`
-_WHERE = {"Alignment": "align", "Source": "align", "align": "align", "match_identity": "align",
-          "match_states": "align", "open_source": "align", "Comparison": "core", "compare": "core",
-          "CrossValidation": "crossval", "crossval": "crossval", "ks": "distances", "l2": "distances",
-          "rel_error": "distances", "GrainComparison": "grain", "grain_errors": "grain", "MEASURES": "measure_names",
-          "run_checks": "report", "write_compare_report": "report", "write_run_report": "report"}
-
-__all__ = list(_WHERE)
-
-
-def __getattr__(name):
-    if name in _WHERE:
-        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_WHERE))
+__all__ = ["Alignment", "Source", "align", "match_identity", "match_states", "open_source", "Comparison", "compare",
+           "CrossValidation", "crossval", "ks", "l2", "rel_error", "GrainComparison", "grain_errors", "MEASURES",
+           "run_checks", "write_compare_report", "write_run_report"]

@@ -33,7 +33,7 @@ import numpy as np
 from ..analysis import ANALYSES
 from ..analysis.plots import _fig
 from .distances import Distance, ks, l2, rel_error
-from .measure_names import MEASURES
+from ..measure_names import MEASURES
 
 __all__ = ["MEASURES", "MeasureOutcome", "compute_measures"]
 

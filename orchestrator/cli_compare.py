@@ -1,11 +1,14 @@
-"""Command group: ``orchestrator compare A B``, ``orchestrator crossval CASE``, ``orchestrator report RUN``."""
+"""Command group: ``orchestrator compare A B``, ``orchestrator crossval CASE``, ``orchestrator report RUN``.
+
+Outside :mod:`orchestrator.compare`, whose ``__init__`` loads the analysis stack: building the
+command table (``orchestrator --help``) then imports none of it; each command imports what it runs."""
 from __future__ import annotations
 
 import json
 import sys
 from pathlib import Path
 
-from ..console import console
+from .console import console
 
 
 def _parse_options(items) -> dict:
@@ -45,7 +48,7 @@ def _print_table(cmp, con):
 
 
 def cmd_compare(args) -> int:
-    from .core import compare
+    from .compare.core import compare
     con = console()
     opts = _parse_options(args.option)
     if args.states:
@@ -72,7 +75,7 @@ def cmd_compare(args) -> int:
 def cmd_ladder(args, con) -> int:
     """``orchestrator crossval CASE --ladder``: the physics ladder on every engine and seed."""
     from rich.table import Table
-    from .ladder import run_ladder
+    from .compare.ladder import run_ladder
 
     def progress(row):
         con.print(f"  {row['rung']} {row['engine']} seed {row['seed']}: {row['status']}"
@@ -116,7 +119,7 @@ _NOT_PHYSICS = ("name", "description", "engines", "engine_options", "analysis", 
 def case_differences(a, b) -> tuple[list[str], list[str]]:
     """The fields (dotted paths) in which the simulated cases of two sources differ, and their scene
     kinds; empty when either is not a simulation (a CT frame set) or carries no case."""
-    from ..frames import Frames
+    from .frames import Frames
     cases = []
     for src in (a, b):
         try:
@@ -143,7 +146,7 @@ def case_differences(a, b) -> tuple[list[str], list[str]]:
 
 
 def cmd_crossval(args) -> int:
-    from .crossval import crossval
+    from .compare.crossval import crossval
     con = console()
     if args.ladder:
         return cmd_ladder(args, con)
@@ -164,7 +167,7 @@ def cmd_crossval(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .report import write_run_report
+    from .compare.report import write_run_report
     p = write_run_report(args.run, out=args.out, analyses=args.analysis, rerun=args.rerun)
     print(f"wrote {p}")
     return 0
