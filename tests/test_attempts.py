@@ -118,11 +118,11 @@ def test_the_recent_pace_of_an_engine_that_reports_sparsely(tmp_path, monkeypatc
     monkeypatch.setattr(AttemptRecord, "WINDOW", 600.0)
     rec = AttemptRecord(tmp_path, 0)
     paces = []
-    for t in range(10, 4001, 10):
+    for t in range(10, 2401, 10):
         now[0] = float(t)
         rec.update(4000 * (t // 400))
-        r = read_attempts(tmp_path)[0].get("recent")
-        if t >= 1200 and r:
+        if t >= 1200 and t % 50 == 0:
+            r = read_attempts(tmp_path)[0].get("recent")
             paces.append(r["steps"] / r["wall_s"])
     assert paces and all(p == 10.0 for p in paces)
 

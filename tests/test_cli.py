@@ -42,15 +42,12 @@ def test_the_command_table_loads_no_analysis_or_imaging_stack():
              "               m.startswith(('orchestrator.analysis.', 'orchestrator.compare.', 'orchestrator.ct.segment',\n"
              "                             'orchestrator.ct.commands', 'skimage', 'matplotlib')))\n"
              "print(heavy)\n"
-             "print(all(c in out.getvalue() for c in ('ct', 'compare', 'crossval', 'stability', 'convergence')))\n"
-             "import orchestrator.compare.align, orchestrator.compare.crossval\n"
-             "from orchestrator.compare import align, crossval, MEASURES\n"
-             "print(callable(align) and callable(crossval), len(MEASURES))\n")
+             "print(all(c in out.getvalue() for c in ('ct', 'compare', 'crossval', 'stability', 'convergence')))\n")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, cwd=REPO)
     assert out.returncode == 0, out.stderr
-    # the package's functions stay what its names say, beside submodules of the same names (a lazy
-    # package __init__ once let ``align`` resolve to the submodule)
-    assert out.stdout.splitlines() == ["[]", "True", "True 10"]
+    assert out.stdout.splitlines() == ["[]", "True"]
+    # (the compare package's own __init__ stays eager: lazily, ``from orchestrator.compare import align``
+    # gave the submodule of that name once imported; tests/compare/test_compare.py calls it)
 
 
 def test_validate_good_and_bad(tmp_path):
