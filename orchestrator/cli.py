@@ -387,9 +387,7 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     # show and refresh as sub-commands, so that refresh's options may stand before or after its runs
     # (one positional list after a choice made argparse drop "refresh --add RUNS")
     ck_sub = ck.add_subparsers(dest="action", required=True, metavar="{show,refresh}")
-    ck_sub.add_parser("show", help="the table in use, entry by entry").set_defaults(func=cmd_clock, runs=[],
-                                                                                      package=False,
-                                                                                      steps_only=False, add=False)
+    ck_sub.add_parser("show", help="the table in use, entry by entry").set_defaults(func=cmd_clock)
     ckr = ck_sub.add_parser("refresh", help="refit the table from complete runs")
     ckr.add_argument("runs", nargs="*", default=["runs"], help="run directories or runs/ trees")
     ckr.add_argument("--package", action="store_true",

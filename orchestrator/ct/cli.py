@@ -23,24 +23,14 @@ import sys
 
 __all__ = ["add_ct_parser", "run_main", "main"]   # the *_main handlers: orchestrator.ct.commands
 
-#: the sub-commands' handlers in :mod:`.commands`, imported when one runs (the parser alone, built for
-#: ``orchestrator --help``, then loads no imaging stack)
-_HANDLERS = ("synth_main", "segment_main", "track_main", "shapes_main")
-
-
 def _deferred(name):
+    """The handler ``name`` of :mod:`.commands`, imported when the sub-command runs: the parser alone,
+    built for ``orchestrator --help``, then loads no imaging stack."""
     def handler(args):
         from . import commands
         return getattr(commands, name)(args)
     handler.__name__ = name
     return handler
-
-
-def __getattr__(name):
-    if name in _HANDLERS:
-        from . import commands
-        return getattr(commands, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def add_ct_parser(subparsers) -> argparse.ArgumentParser:

@@ -232,17 +232,26 @@ def _scenes_honouring(term: str) -> list[str]:
     return [k for k in scene_kinds() if term in get_scene(k).honoured]
 
 
-def run_case_scene(run_dir) -> tuple[dict, str]:
+def run_case_scene(run_dir, summary: dict | None = None) -> tuple[dict, str]:
     """The ``scene`` section of a run's resolved ``case.yaml`` ({} when unreadable) and the case
-    file the run came from (``summary.json`` → ``case_source``; "" when unknown): what a sample
-    check quotes when it names the case field that fixes a run."""
+    file the run came from (``summary.json`` → ``case_source``, read unless the caller has the
+    ``summary``; "" when unknown): what a sample check quotes when it names the case field that
+    fixes a run (:func:`case_field`)."""
     run_dir = Path(run_dir)
     try:
         scene = (yaml.safe_load((run_dir / "case.yaml").read_text()) or {}).get("scene") or {}
     except (OSError, ValueError, AttributeError):
         scene = {}
-    try:
-        source = json.loads((run_dir / "summary.json").read_text()).get("case_source") or ""
-    except (OSError, ValueError, AttributeError):
-        source = ""
-    return scene, str(source)
+    if summary is None:
+        try:
+            summary = json.loads((run_dir / "summary.json").read_text())
+        except (OSError, ValueError):
+            summary = {}
+    return scene, str((summary or {}).get("case_source") or "")
+
+
+def case_field(prefix: str, section: dict | None, field: str, model, case_file: str = "") -> str:
+    """A case field as a fix names it: ``PREFIX.FIELD in CASE_FILE (now VALUE)``, the value from the
+    run's resolved ``section`` of the case or, where the case is silent, ``model``'s default."""
+    value = (section or {}).get(field, model.model_fields[field].default)
+    return f"{prefix}.{field}{f' in {case_file}' if case_file else ''} (now {value})"

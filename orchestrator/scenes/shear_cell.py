@@ -564,19 +564,12 @@ def compression_advice(relative_error: float | None, scene: dict | None = None, 
     """
     if relative_error is None or abs(relative_error) <= COMPRESSION_TOLERANCE:
         return ""
-    scene = scene or {}
-    where = f" in {case_file}" if case_file else ""
-
-    def now(field, default):
-        return f"{field}{where} (now {scene.get(field, default)})"
-
     if relative_error < 0:
         return (f"the piston had not reached the load when the stage ended (the column still collapsing): "
-                f"raise scene.{now('travel_time_factor', Scene.model_fields['travel_time_factor'].default)}, "
+                f"raise {base.case_field('scene', scene, 'travel_time_factor', Scene, case_file)}, "
                 f"e.g. to 2, and run again")
     return (f"the piston overshot the load (the servo could not stop it at its speed): lower "
-            f"scene.{now('compression_inertial_number', Scene.model_fields['compression_inertial_number'].default)}"
-            f" and run again")
+            f"{base.case_field('scene', scene, 'compression_inertial_number', Scene, case_file)} and run again")
 
 
 def _compression_check(params, time, step, force_z) -> dict:

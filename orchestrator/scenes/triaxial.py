@@ -530,7 +530,7 @@ def stage1_problems(run_dir: Path) -> list[str]:
         return []
     return [f"stage 1 ended unconverged: σ1/p = {iso.get('sigma1_error', math.nan) + 1:.3f}, "
             f"σ3/p = {iso.get('sigma3_error', math.nan) + 1:.3f} (tolerance {tol:g}) when loading began: "
-            + stage1_advice(*base.run_case_scene(run_dir))]
+            + stage1_advice(*base.run_case_scene(run_dir, summary))]
 
 
 def stage1_advice(scene: dict | None = None, case_file: str = "") -> str:
@@ -539,14 +539,10 @@ def stage1_advice(scene: dict | None = None, case_file: str = "") -> str:
     (``isotropic.inertial_number``) where the stresses swing about p rather than creep toward it
     (YADE's PFacet membrane at 2 000 grains: σ1/p between 0.77 and 1.27 over seven chunks,
     docs/validation.md)."""
-    iso = (scene or {}).get("isotropic") or {}
-    where = f" in {case_file}" if case_file else ""
-
-    def now(field):
-        return f"{field}{where} (now {iso.get(field, Isotropic.model_fields[field].default)})"
-
-    return (f"raise scene.isotropic.{now('max_chunks')} so that the stresses can settle before the loading, "
-            f"or, where they swing about p, lower scene.isotropic.{now('inertial_number')}")
+    iso = (scene or {}).get("isotropic")
+    return (f"raise {base.case_field('scene.isotropic', iso, 'max_chunks', Isotropic, case_file)} so that the "
+            f"stresses can settle before the loading, or, where they swing about p, lower "
+            f"{base.case_field('scene.isotropic', iso, 'inertial_number', Isotropic, case_file)}")
 
 
 def step_plan(scene_params) -> base.StepPlan:
