@@ -143,7 +143,7 @@ class AttemptRecord:
         a whole WINDOW records 0 steps over the time since its last one (stalled or paused).
 
         The samples are taken when a step is first reported, not at every write: an engine that
-        reports sparsely (YADE's triaxial on the medium clumps: every 5 040 steps, ~7 min of CPU) put
+        reports sparsely (YADE's triaxial on the medium clumps: every 5 040 steps) put
         a window of writes around one report or two, and its pace read 12 or 31 steps per CPU
         second from the same steady run."""
         e = self.entry
