@@ -76,6 +76,7 @@ from .resources import data_file
 __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "engine_seconds", "expected_steps", "step_plan",
            "samples_from_runs", "fit", "planned_steps",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY", "SPREAD_WORDS",
+           "UNMEASURED_WORDS",
            "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
            "speed_ratio", "run_engine_seconds", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
 
@@ -90,6 +91,12 @@ ASSUMED_WORDS = "an assumed parallel efficiency of"
 SPREAD_WORDS = "as the runs measured took"
 #: a spread of step counts narrower than this ratio of most to fewest is not printed [-]
 SPREAD_NOTE = 1.2
+
+#: the words an estimate's basis says this machine's speed is not measured yet with (sizing prints
+#: that clause): the package table's figures are another machine's, and 2-core machines differ by
+#: more than the estimate's ±30 % (the default case on the AMD EPYC of session 37 took 101 s where
+#: the table, fitted on session 36's machine, said 237 s: docs/validation.md, the clock)
+UNMEASURED_WORDS = "this machine's speed not measured yet"
 
 #: an estimate for more than this many times the largest run its entry was fitted on says it is an
 #: extrapolation: there the fitted curve's form decides the figure (docs/validation.md, the clock: YADE's
@@ -349,7 +356,8 @@ def record_speed(run_dir) -> float | None:
     table = _speed_table()
     rows = table.setdefault(machine_id(), {}).setdefault(smp.engine, [])
     against = _against(_as_throughputs(_package_table()), smp.engine, smp.scene)
-    rows[:] = [r for r in rows if r.get("run") != str(run_dir)] + [{"run": str(run_dir), "scene": smp.scene,
+    where = str(Path(run_dir).resolve())      # the same relative path names other runs elsewhere
+    rows[:] = [r for r in rows if r.get("run") != where] + [{"run": where, "scene": smp.scene,
                                                                       "n": int(smp.n_particles),
                                                                       "ratio": round(ratio, 4),
                                                                       "quiet": smp.quiet,
@@ -511,6 +519,10 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         mf = machine_factor(engine, scene, n_particles)
         if mf is not None:
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
+        elif used is not None:       # an entry without a machine was fitted before entries said so: elsewhere
+            whose = f"{scenes[used].machine}'s" if scenes[used].machine else "an earlier machine's"
+            note = (f", {UNMEASURED_WORDS} (the table's is {whose}; 2-core machines differ by 2x): the "
+                    f"first complete {engine} run here measures it")
     if used is not None:
         tp = scenes[used]
         basis = (f"measured on {tp.runs} {engine} {scene} run(s)" if used == scene else

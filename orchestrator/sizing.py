@@ -16,7 +16,7 @@ import os
 import time
 from typing import TYPE_CHECKING
 
-from .clock import ASSUMED_WORDS, SPREAD_WORDS, clock_key, estimate_engine_time, load_table, planned_steps, step_plan
+from .clock import ASSUMED_WORDS, SPREAD_WORDS, UNMEASURED_WORDS, clock_key, estimate_engine_time, load_table, planned_steps, step_plan
 from .humanize import fmt_bytes, fmt_s
 from .registry import get_engine
 
@@ -112,12 +112,14 @@ def _basis_note(basis: str) -> str:
     """The estimate's basis after the figure, unless it is the engine's and scene's own runs at sizes
     near the case's on the ranks they were measured on (then only its caveats: an extrapolation,
     :data:`orchestrator.clock.EXTRAPOLATION_NOTE`, an assumed parallel efficiency, or the spread
-    of the steps the runs measured took, :data:`orchestrator.clock.SPREAD_WORDS`)."""
+    of the steps the runs measured took, :data:`orchestrator.clock.SPREAD_WORDS`, or this machine's speed
+    not measured yet, :data:`orchestrator.clock.UNMEASURED_WORDS`)."""
     if not basis:
         return ""
     if basis.startswith("measured"):
         caveats = [clause for clause in basis.split(", ")
-                   if clause.endswith("an extrapolation") or ASSUMED_WORDS in clause or SPREAD_WORDS in clause]
+                   if clause.endswith("an extrapolation") or ASSUMED_WORDS in clause or SPREAD_WORDS in clause
+                   or UNMEASURED_WORDS in clause]
         return f" ({', '.join(caveats)})" if caveats else ""
     return f" ({basis})"
 

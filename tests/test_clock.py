@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import asdict, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -407,13 +408,20 @@ def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypa
     """A quiet run that took 0.44 of the package table's prediction (LIGGGHTS' small shear cell on
     a newer 2-core machine, 27 Nov 2026) scales the next estimates from the package table by its
     median, and says so; a run that shared its cores, or an entry of a user table, is left alone."""
-    from orchestrator.clock import _package_table, machine_factor, record_speed
+    from orchestrator.clock import UNMEASURED_WORDS, _package_table, machine_factor, machine_id, record_speed
     monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
     monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))
     tp = Throughput(**_package_table()["liggghts"]["shear_cell"])
     n, steps = 1025, 383_546
     before, basis = estimate_engine_time("liggghts", "shear_cell", n, steps, 2)
-    assert before == pytest.approx(tp.engine_time(n, steps, 2)) and "machine" not in basis
+    assert before == pytest.approx(tp.engine_time(n, steps, 2))
+    # before any run here the estimate says whose speed it is (session 37's machine ran the default
+    # case in 0.43 of the table's time, unwarned)
+    assert tp.machine != machine_id()
+    assert f"{UNMEASURED_WORDS} (the table's is an earlier machine's" in basis and "liggghts run here measures it" in basis
+    _, basis = estimate_engine_time("liggghts", "shear_cell:smooth_sidewall", n, steps, 2)
+    smooth = Throughput(**_package_table()["liggghts"]["shear_cell:smooth_sidewall"])
+    assert smooth.machine and f"{UNMEASURED_WORDS} (the table's is {smooth.machine}'s" in basis
 
     def run(name, ratio, load):
         d = tmp_path / "runs" / name
@@ -433,6 +441,12 @@ def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypa
     assert machine_factor("liggghts") == (pytest.approx(0.47, rel=1e-3), 2)
     after, basis = estimate_engine_time("liggghts", "shear_cell", n, steps, 2)
     assert after == pytest.approx(0.47 * before, rel=1e-3) and "× 0.47 for this machine's speed (2 run(s))" in basis
+    assert UNMEASURED_WORDS not in basis
+    # a record names its run by its absolute path (a relative one names other runs from elsewhere)
+    monkeypatch.chdir(tmp_path)
+    assert record_speed(Path("runs") / "quiet-1") == pytest.approx(0.44, rel=1e-3)
+    rows = json.loads((tmp_path / "speed.json").read_text())[machine_id()]["liggghts"]
+    assert sorted(r["run"] for r in rows) == sorted(str(tmp_path / "runs" / k) for k in ("quiet-1", "quiet-2"))
     (tmp_path / "user.json").write_text(json.dumps({"liggghts": {"shear_cell": {
         "startup_s": 1.0, "per_step_s": 0.0, "per_particle_step_s": 1e-7}}}))
     t_user, basis = estimate_engine_time("liggghts", "shear_cell", n, steps)
