@@ -24,7 +24,6 @@ The run hash covers the frames file's content and the frame index.
 from __future__ import annotations
 
 import hashlib
-import math
 from pathlib import Path
 
 import numpy as np

@@ -3,7 +3,6 @@ the grain-level errors; write ``comparison.csv`` and ``report.html``.
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path

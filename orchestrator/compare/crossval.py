@@ -20,7 +20,6 @@ import pandas as pd
 from engines.base import EngineError
 
 from ..case import Case, load_case
-from ..registry import engine_names
 from ..runner import RunOutcome, run_case
 from .core import Comparison, compare
 from ..analysis._common import atomic_write_csv

@@ -290,8 +290,8 @@ def compare_rungs(runs: pd.DataFrame, rung_order: list[str]) -> LadderResult:
                 # scatter (one seed) the floor alone decides
                 ok = None if floor_ok is None else bool(floor_ok or significant is False)
                 rows.append({"rung": rung, "engines": f"{a} vs {b}", "observable": obs,
-                             f"mean A": ra["mean"] if obs != "density_profile" else np.nan,
-                             f"mean B": rb["mean"] if obs != "density_profile" else np.nan,
+                             "mean A": ra["mean"] if obs != "density_profile" else np.nan,
+                             "mean B": rb["mean"] if obs != "density_profile" else np.nan,
                              "relative difference": diff, "scatter (2 sem, relative)": scatter,
                              "significant": significant, "floor": floor, "ok": ok, "scatter from": pairing})
     # the columns even without a pair (one engine: its runs and statistics, nothing to compare yet)

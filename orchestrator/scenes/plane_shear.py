@@ -28,11 +28,10 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from ..case import Strict, positive
 from ..contact_law import dashpot_stable_servo_speed, effective_modulus, wall_dashpot_coefficient

@@ -13,7 +13,6 @@ not observables to compare.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
