@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
+
+#: the name :func:`temp_file` gives (``tempfile.mkstemp``: the prefix ``.<name>.``, eight random
+#: characters, the suffix)
+_TEMP_NAME = re.compile(r"^\..+\.[A-Za-z0-9_]{8}(\.[A-Za-z0-9]+)?$")
 
 
 def cache_dir(kind: str) -> Path:
@@ -33,6 +38,20 @@ def temp_file(path, suffix: str = "") -> Path:
     finally:
         os.close(fd)
     return Path(tmp)
+
+
+def remove_stale_temp_files(folder) -> list[Path]:
+    """Delete the temporary files :func:`temp_file` made under ``folder`` (recursively) that a killed
+    process left behind, and return them. Only for a folder no other process writes to (a run
+    directory whose lock the caller holds): a write under way there would lose its file. A run
+    killed while its analyses wrote left ``analysis/.profiles_axial.csv.zu2ysuqa.csv`` beside the
+    tables of the resumed run (session 37)."""
+    gone = []
+    for f in Path(folder).rglob(".*"):
+        if f.is_file() and _TEMP_NAME.match(f.name):
+            f.unlink(missing_ok=True)
+            gone.append(f)
+    return gone
 
 
 def write_text(path, text: str) -> Path:

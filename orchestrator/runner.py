@@ -22,7 +22,7 @@ import yaml
 from engines.base import EngineError
 from engines.render import templates_hash
 
-from .atomic import write_json, write_text
+from .atomic import remove_stale_temp_files, write_json, write_text
 from .attempts import clear_attempts, read_attempts
 from .clock import record_speed
 from .case import Case, case_from_dict
@@ -296,6 +296,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     run whose engine input is identical (orchestrator.twins; not under --force, which redoes)."""
     timings = {}
     t0 = time.perf_counter()
+    remove_stale_temp_files(run_dir)        # a killed attempt's half-written temporary files (the lock is ours)
     params, subs = prepare(case, engine_name, run_dir, params)
     prior = read_summary(run_dir) or {}
     resume = None if dry_run or prior.get("status") not in ("running", "failed", "interrupted") else eng.resume_state(run_dir)

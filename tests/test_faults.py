@@ -312,6 +312,23 @@ def test_outputs_follow_the_umask(tmp_path):
 
 
 # --------------------------------------------------------------------------------- stale state
+def test_a_killed_writers_temporary_files_are_swept_and_nothing_else(tmp_path):
+    """A SIGKILL between a temporary file's creation and its rename leaves ``.<name>.<8 chars><suffix>``
+    (session 37: ``analysis/.profiles_axial.csv.zu2ysuqa.csv`` beside a resumed run's tables). The
+    sweep a run does under its lock removes those and keeps every other file, hidden ones too."""
+    from orchestrator.atomic import remove_stale_temp_files, temp_file
+    (tmp_path / "analysis").mkdir()
+    stale = [temp_file(tmp_path / "analysis" / "profiles_axial.csv", ".csv"),
+             temp_file(tmp_path / "analysis" / "friction.png", ".png"), temp_file(tmp_path / "summary.json")]
+    keep = [tmp_path / ".lock", tmp_path / "frames.h5.partial", tmp_path / "analysis" / "profiles_axial.csv",
+            tmp_path / ".hidden_notes.txt", tmp_path / "dump" / "dump.100.liggghts"]
+    for f in keep:
+        f.parent.mkdir(exist_ok=True)
+        f.write_text("x")
+    assert sorted(remove_stale_temp_files(tmp_path)) == sorted(stale)
+    assert not any(f.exists() for f in stale) and all(f.exists() for f in keep)
+
+
 def test_running_without_a_live_owner_is_marked_interrupted(tmp_path):
     from orchestrator.run_summary import read_summary
     run = tmp_path / "run"

@@ -159,22 +159,28 @@ def test_killed_during_parse_or_analysis_resumes_exactly(engine, phase, tmp_path
     equal to an uninterrupted run's (the shear cell smoke case: the scene with the most analyses)."""
     scene = "shear_cell"
     case = REPO / "cases" / f"{SCENES[scene]}.yaml"
-    runs = tmp_path / "runs"
-    cmd = orchestrator("run", case, "--engine", engine, "--runs", runs, "--quiet")
-    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     marker = "frames.h5.partial" if phase == "parse" else "analysis"
-    t0, found = time.time(), []
-    while not found:
-        assert proc.poll() is None, f"the run ended before its {phase} phase was caught"
-        assert time.time() - t0 < 1800, f"no {phase} phase within 30 min"
-        found = list(runs.glob(f"{SCENES[scene]}/{engine}-*/{marker}"))
-        time.sleep(0.005)
-    os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait(timeout=60)
-    run_dir = found[0].parent
+    # the parse of the smoke's 7 frames can end between the poll that sees its file and the kill
+    # (session 37's faster machine): such a try did not test the phase, and the next one starts anew
+    for attempt in range(5):
+        runs = tmp_path / f"runs{attempt}"
+        cmd = orchestrator("run", case, "--engine", engine, "--runs", runs, "--quiet")
+        proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        t0, found = time.time(), []
+        while not found:
+            assert proc.poll() is None, f"the run ended before its {phase} phase was caught"
+            assert time.time() - t0 < 1800, f"no {phase} phase within 30 min"
+            found = list(runs.glob(f"{SCENES[scene]}/{engine}-*/{marker}"))
+            time.sleep(0.001)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=60)
+        run_dir = found[0].parent
+        caught = phase != "parse" or not (run_dir / "frames.h5").exists()
+        print(f"try {attempt + 1}: killed {'in' if caught else 'after'} the {phase} phase")
+        if caught:
+            break
+    assert caught, f"five tries killed the run after its {phase} phase, none in it"
     assert json.loads((run_dir / "summary.json").read_text())["status"] == "running"   # killed in the phase
-    if phase == "parse":
-        assert not (run_dir / "frames.h5").exists()
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
     assert out.returncode == 0, out.stderr[-3000:]
     summary = json.loads((run_dir / "summary.json").read_text())

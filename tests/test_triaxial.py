@@ -19,6 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from scipy.stats import poisson
 
 from notebook_util import execute_notebook, notebook_images, notebook_text
 from orchestrator.case import load_case
@@ -175,10 +176,18 @@ def test_friction_restored_before_the_drag_ramp(tmp_path, eng):
     assert ratios, "no stage-1 frame after the ramp began"
     last = ratios[max(ratios)]
     above = max(float(np.max(r)) for r in ratios.values())
-    at_prep = float(np.mean(np.abs(last / mu_prep - 1) < 2e-3))
-    print(f"{eng}: largest |Ft|/|Fn| in the ramp's frames {above:.3f}; at {mu_prep} at the end of stage 1: {at_prep:.3%}")
+    # contacts sliding at the preparation friction pile up at |Ft|/|Fn| = mu_prep (>= 2 % of the
+    # strong ones within 0.2 % of it when friction is not restored); once restored, a contact sits
+    # there only by chance, at the rate of its neighbourhood (1-2 of ~300 on session 37's packings,
+    # where the old test's "none" failed): at most the Poisson 99.9 % bound of that rate
+    dev = np.abs(last / mu_prep - 1)
+    n_at = int(np.sum(dev < 2e-3))
+    chance = np.sum((dev >= 2e-3) & (dev < 0.1)) * 2e-3 / (0.1 - 2e-3)
+    bound = int(poisson.ppf(0.999, max(chance, 0.1)))
+    print(f"{eng}: largest |Ft|/|Fn| in the ramp's frames {above:.3f}; at {mu_prep} at the end of stage 1: "
+          f"{n_at} of {last.size} strong contacts (by chance {chance:.2f}, bound {bound})")
     assert 2 * mu_prep < above <= 1.1 * mu      # LIGGGHTS: sticking contacts exceed μ by their dashpot (≤ 11 %)
-    assert at_prep == 0.0
+    assert n_at <= bound
 
 
 @pytest.mark.engine
