@@ -27,6 +27,16 @@ def portable(x: np.ndarray) -> np.ndarray:
     return np.ldexp(np.round(m * 2.0 ** PORTABLE_BITS) / 2.0 ** PORTABLE_BITS, e)
 
 
+def portable_cube(x: np.ndarray) -> np.ndarray:
+    """``x ** 3`` as the C library's ``pow`` computes it, element by element [same units cubed]. NumPy's
+    vectorised ``power`` takes the SVML path on CPUs with AVX-512 and differs from ``pow`` by an ulp
+    in some values; the dense packer's weights (:func:`relax_overlaps`) carried that into packings
+    1e-12 apart after its sweeps, and the trajectories of a triaxial run apart after that (session
+    37's AMD EPYC of family 26 against the AVX2 machines before it). ``math.pow`` is the same on every
+    CPU, and is what NumPy computes without AVX-512, so the packings stay those of before."""
+    return np.array([math.pow(v, 3.0) for v in np.asarray(x, dtype=float).ravel().tolist()]).reshape(np.shape(x))
+
+
 def truncated_lognormal(n: int, mu_ln: float | None, sigma_ln: float, d_min: float, d_max: float,
                         rng, median: float | None = None) -> np.ndarray:
     """``n`` diameters [m] with ln d ~ N(``mu_ln``, ``sigma_ln``²) truncated to [``d_min``, ``d_max``]
@@ -224,7 +234,7 @@ def relax_overlaps(pos: np.ndarray, r: np.ndarray, container, tol: float, scale:
     pos = np.array(pos, dtype=float)
     r = np.asarray(r, dtype=float)
     n = len(r)
-    vol = r ** 3
+    vol = portable_cube(r)
     skin = _VERLET_SKIN * float(np.median(r))
     worst = np.inf
     it = 0

@@ -4,10 +4,11 @@ The rendered deck (and every other text file the engine's ``render`` writes) is 
 run directory and the package version replaced by placeholders; data files such as particle
 tables and meshes are summarised by their text with the numbers taken out, hashed, and three sums
 over their numbers) and compared with ``tests/golden/``: the text exactly, every number to a
-relative 1e-9. Floating point is not bit-for-bit the same on every CPU: numba compiles for the host
-(FMA or not) and the BLAS picks its kernels at run time, so the triaxial packing's coordinates
-differ from one machine to another in their last 3-4 digits (session 37: an AMD EPYC against the
-machine that wrote the golden files, 1e-12 relative), which is not a change of behaviour.
+relative 1e-9. Floating point is not bit-for-bit the same on every CPU: NumPy dispatches SIMD
+kernels at run time (its AVX-512 ``power`` differs from the C library's ``pow`` by an ulp), and
+numba compiles for the host. Session 37's AMD EPYC rendered the triaxial smoke's packing 1e-12
+apart from the machine that wrote the golden files until the packer cubed portably
+(``psd.portable_cube``); a difference of that size is not a change of behaviour.
 
 A change to a template, to ``derive`` or to an adapter that changes a deck makes this test fail
 and shows the diff. If the change is intended, regenerate the golden files and commit them with

@@ -1,6 +1,9 @@
 """The one truncated-log-normal sampler (orchestrator.psd.truncated_lognormal), used by the
 plane-shear and shear-cell scenes (by median) and the triaxial scene (by truncated mean)."""
 import math
+import os
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,3 +137,31 @@ def test_dense_packer_verlet_list_finds_every_overlap():
     assert worst < 1e-3 and it == it_ref < 3000
     assert np.abs(pos - ref).max() < 1e-9
     assert psd.max_overlap(pos, r) < 1e-3 * r.min()
+
+
+_PACK_DIGEST = """
+import hashlib, numpy as np
+from orchestrator.psd import lognormal_diameters
+from orchestrator.scenes.triaxial import pack_cylinder
+d = lognormal_diameters(300, 5.5e-4, 3e-4, 9e-4, 0.25, np.random.default_rng(1))
+pos, _ = pack_cylinder(d / 2, 1.7e-3, 6.7e-3, np.random.default_rng(1))
+print(hashlib.sha256(pos.tobytes()).hexdigest())
+"""
+
+
+def test_the_dense_packing_is_the_same_with_or_without_avx512():
+    """NumPy's vectorised ``power`` takes an SVML path on CPUs with AVX-512 and differs by an ulp from
+    the C library's ``pow``; the dense packer's weights carried it into packings 1e-12 apart and the
+    triaxial smoke's trajectory apart after them (session 37). The packer now cubes with
+    ``portable_cube``: the same packing with NumPy's AVX-512 dispatch on (where the CPU has it) and
+    off (``NPY_DISABLE_CPU_FEATURES``, as on the machines without it)."""
+    import subprocess      # here: the only test of this file that starts a process
+    off = "AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR X86_V4"
+    digests = []
+    for disabled in ("", off):
+        env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled}
+        out = subprocess.run([sys.executable, "-c", _PACK_DIGEST], capture_output=True, text=True, env=env,
+                             cwd=Path(__file__).resolve().parents[1], timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        digests.append(out.stdout.strip())
+    assert digests[0] == digests[1]

@@ -820,8 +820,10 @@ def cached_packing(r: np.ndarray, R: float, H: float, seed: int) -> tuple[np.nda
     ``~/.cache/orchestrator``), so that both engines' runs of a case pack once. The key's last
     field is the packer's version (2: :func:`~orchestrator.psd.relax_overlaps` on a Verlet list,
     whose sums differ from version 1's in the last bits; 3: the random start rounded by
-    :func:`~orchestrator.psd.portable`), so a cache never mixes them."""
-    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 3)).encode())
+    :func:`~orchestrator.psd.portable`; 4: the push's volume weights by
+    :func:`~orchestrator.psd.portable_cube`, the same on CPUs with AVX-512 as on the others), so a
+    cache never mixes them."""
+    h = hashlib.sha256(np.asarray(r, dtype=np.float64).tobytes() + repr((float(R), float(H), int(seed), 4)).encode())
     root = cache_dir("packings")
     f = root / f"{h.hexdigest()[:24]}.npz"
     if f.exists():
