@@ -296,7 +296,9 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     run whose engine input is identical (orchestrator.twins; not under --force, which redoes)."""
     timings = {}
     t0 = time.perf_counter()
-    remove_stale_temp_files(run_dir)        # a killed attempt's half-written temporary files (the lock is ours)
+    # a killed attempt's half-written temporary files: only the analyses' writers make them
+    # (analysis._common, atomic.temp_file), so the sweep skips dump/ and restart/ (the lock is ours)
+    remove_stale_temp_files(run_dir / "analysis")
     params, subs = prepare(case, engine_name, run_dir, params)
     prior = read_summary(run_dir) or {}
     resume = None if dry_run or prior.get("status") not in ("running", "failed", "interrupted") else eng.resume_state(run_dir)
