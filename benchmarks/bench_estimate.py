@@ -14,8 +14,9 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
   predicts itself (an honest out-of-sample figure; "n/a" when it is the only run of its kind);
 - ``machine``: the package table times this machine's speed as the *other* quiet runs of the same
   engine given here measure it (their :func:`orchestrator.clock.speed_ratio`, those of the same
-  scene where there are any, at this run's size: :func:`orchestrator.clock.speed_factor`, what
-  ``run --dry-run`` prints once the machine has recorded them; "n/a" without such a run).
+  scene where there are any, at this run's size, and of as many ranks or threads where there are
+  any: :func:`orchestrator.clock.speed_factor`, what ``run --dry-run`` prints once the machine has
+  recorded them; "n/a" without such a run).
 
 ``ms/step`` is the run's own loop time per step (one rank's, as the fit takes it) and ``start s``
 its start-up and set-up (engine time minus loop time): what the table's per-step and start-up
@@ -88,8 +89,8 @@ def main(argv=None) -> int:
         loo = tp.engine_time(s.n_particles, expected_steps(budget, s.plan, tp), s.ranks) if tp else math.nan
         r1 = est / s.engine_s if est == est else math.nan
         r2 = loo / s.engine_s if loo == loo else math.nan
-        mf = speed_factor([(o.scene, o.n_particles, ratio_of[o.source], o.quiet) for o in samples
-                           if o.engine == s.engine and o.source != s.source], s.scene, s.n_particles)
+        mf = speed_factor([(o.scene, o.n_particles, ratio_of[o.source], o.quiet, o.ranks) for o in samples
+                           if o.engine == s.engine and o.source != s.source], s.scene, s.n_particles, s.ranks)
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
         r3 = mf[0] * pk / s.engine_s if mf and pk == pk else math.nan
         if r2 == r2:

@@ -345,10 +345,10 @@ def _against(package: dict, engine: str, scene: str) -> str | None:
 
 
 def record_speed(run_dir) -> float | None:
-    """Record the complete run ``run_dir``'s :func:`speed_ratio` under this machine, with its scene
-    and particle count; returns it, or None when the run does not tell (not complete, shared its
-    cores, or no package entry). The last :data:`SPEED_KEEP` runs of each engine, scene and size
-    (:func:`_size_groups`) are kept."""
+    """Record the complete run ``run_dir``'s :func:`speed_ratio` under this machine, with its scene,
+    particle count and ranks or threads; returns it, or None when the run does not tell (not
+    complete, shared its cores, or no package entry). The last :data:`SPEED_KEEP` runs of each
+    engine, scene and size (:func:`_size_groups`) are kept."""
     smp = _sample(Path(run_dir))
     ratio = speed_ratio(smp) if smp is not None else None
     if ratio is None:
@@ -361,6 +361,7 @@ def record_speed(run_dir) -> float | None:
                                                                       "n": int(smp.n_particles),
                                                                       "ratio": round(ratio, 4),
                                                                       "quiet": smp.quiet,
+                                                                      "ranks": int(smp.ranks),
                                                                       "against": against}]
     rows[:] = _keep_recent(rows)
     out = speed_table_path()
@@ -464,15 +465,53 @@ def _prefer_quiet(records: list) -> list:
     return keep
 
 
-def speed_factor(records, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
-    """(speed ratio [-], records it rests on) for a run of ``scene`` with ``n_particles``, from
-    ``records`` of one engine, each ``(scene, particle count or None, ratio[, quiet])`` (the runs
-    that shared the machine left out where a quiet run of the same size stands in): those of ``scene``
-    where there are any, at ``n_particles`` (:func:`speed_at_size`, beyond their sizes with the
-    engine's :func:`size_trend` from the other scenes); else all of them, their median (the ratio
+def _ranks_of(record) -> int:
+    """The ranks or threads of a speed record ``(scene, n, ratio, quiet, ranks)`` [-]: 1 where the
+    record does not say (records of before session 38)."""
+    return max(int(record[4]), 1) if len(record) > 4 and record[4] else 1
+
+
+def _same_ranks(records: list, scene: str | None, ranks: int) -> tuple[list, bool]:
+    """(the records that speak for a run on ``ranks`` ranks or threads, whether they ran on as many
+    ranks, more than one: then they measured this machine's parallel speed-up as well).
+    A record is the run's time over the package table's prediction, which divides a run on several
+    ranks by the table's parallel speed-up (assumed 0.7 per added rank until measured): such a
+    record measures this machine's speed and that speed-up together. YADE's small shear cell (1 025
+    grains) took 315 s on one thread and 366 s on two here (session 38), 0.30 and 0.59 of the
+    table, so one median of both says neither. A run on ``ranks`` takes the records of as many
+    ranks where its scene (or the scene it falls back to) has any, else the one-rank records (the
+    machine's speed, the table's speed-up); a one-rank run takes the one-rank records, or all where
+    there are none."""
+    want = max(int(ranks or 1), 1)
+    same = [r for r in records if _ranks_of(r) == want]
+    if want == 1:
+        return (same or records), False
+    keys = set(key_fallbacks(scene)) if scene is not None else set()
+    if any(r[0] in keys for r in same):
+        return same, True
+    single = [r for r in records if _ranks_of(r) == 1]
+    return (single, False) if single else (records, False)
+
+
+def speed_factor(records, scene: str | None = None, n_particles: int | None = None,
+                 ranks: int = 1) -> tuple[float, int] | None:
+    """(speed ratio [-], records it rests on) for a run of ``scene`` with ``n_particles`` on
+    ``ranks`` ranks or threads, from ``records`` of one engine, each ``(scene, particle count or
+    None, ratio[, quiet[, ranks]])``: those of as many ranks (:func:`_same_ranks`), the runs that
+    shared the machine left out where a quiet run of the same size stands in; of them those of
+    ``scene`` where there are any, at ``n_particles`` (:func:`speed_at_size`, beyond their sizes with
+    the engine's :func:`size_trend` from the other scenes); else all of them, their median (the ratio
     differs by scene: YADE's smoke shear cell 0.23 of the table, its plane shear 0.42). None without
     a record. The one rule :func:`machine_factor` and ``benchmarks/bench_estimate.py`` apply."""
-    records = _prefer_quiet([r for r in records if r[2] is not None and r[2] > 0])
+    found = _speed_factor(records, scene, n_particles, ranks)
+    return found[:2] if found else None
+
+
+def _speed_factor(records, scene, n_particles, ranks) -> tuple[float, int, bool] | None:
+    """:func:`speed_factor` and whether its records ran on as many ranks (:func:`_same_ranks`)."""
+    records = [r for r in records if r[2] is not None and r[2] > 0]
+    records, same_ranks = _same_ranks(records, scene, ranks)
+    records = _prefer_quiet(records)
     same = []
     for key in key_fallbacks(scene) if scene is not None else []:     # a variant not measured yet
         same = [r for r in records if r[0] == key]
@@ -483,21 +522,30 @@ def speed_factor(records, scene: str | None = None, n_particles: int | None = No
     if not use:
         return None
     if not same:
-        return speed_at_size([r[1] for r in use], [r[2] for r in use], None), len(use)
+        return speed_at_size([r[1] for r in use], [r[2] for r in use], None), len(use), same_ranks
     trend = size_trend([r for r in records if r[0] != scene])
-    return speed_at_size([r[1] for r in use], [r[2] for r in use], n_particles, trend), len(use)
+    return speed_at_size([r[1] for r in use], [r[2] for r in use], n_particles, trend), len(use), same_ranks
 
 
-def machine_factor(engine: str, scene: str | None = None, n_particles: int | None = None) -> tuple[float, int] | None:
+def machine_factor(engine: str, scene: str | None = None, n_particles: int | None = None,
+                   ranks: int = 1) -> tuple[float, int] | None:
     """(ratio of engine time to the package table's prediction, runs it rests on) of ``engine`` on
-    this machine (:func:`record_speed`), by :func:`speed_factor`; None before a run has been recorded."""
+    this machine (:func:`record_speed`) for a run on ``ranks`` ranks or threads, by
+    :func:`speed_factor`; None before a run has been recorded."""
+    found = _machine_factor(engine, scene, n_particles, ranks)
+    return found[:2] if found else None
+
+
+def _machine_factor(engine: str, scene: str | None, n_particles: int | None,
+                    ranks: int) -> tuple[float, int, bool] | None:
+    """:func:`machine_factor` and whether its runs ran on as many ranks (:func:`_same_ranks`)."""
     rows = _speed_table().get(machine_id(), {}).get(engine) or []
     package = _as_throughputs(_package_table())
     # a ratio recorded against a package entry since refitted says nothing of this machine (rows of
     # before the record kept its entry have no "against")
     rows = [r for r in rows if r.get("against") is None or r["against"] == _against(package, engine, r.get("scene"))]
-    return speed_factor([(r.get("scene"), r.get("n"), r["ratio"], r.get("quiet")) for r in rows
-                         if isinstance(r.get("ratio"), (int, float))], scene, n_particles)
+    return _speed_factor([(r.get("scene"), r.get("n"), r["ratio"], r.get("quiet"), r.get("ranks")) for r in rows
+                          if isinstance(r.get("ratio"), (int, float))], scene, n_particles, ranks)
 
 
 def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, ranks: int = 1,
@@ -508,6 +556,7 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     took (:func:`expected_steps`). ``machine_speed``: scale an entry of the package table by this
     machine's measured speed (:func:`machine_factor`); default: when ``table`` is the default one."""
     scale, note = 1.0, ""
+    ranks_measured = False          # this machine's runs on as many ranks measured the speed-up too
     if machine_speed is None:
         machine_speed = table is None
     user = _user_table()
@@ -516,9 +565,12 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     used = table_entry_key(scenes, scene)
     fitted_here = used is not None and scenes[used].machine == machine_id()
     if machine_speed and (used or scene) not in user.get(engine, {}) and not fitted_here:   # a user entry is this machine's
-        mf = machine_factor(engine, scene, n_particles)
+        mf = _machine_factor(engine, scene, n_particles, ranks)
         if mf is not None:
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
+            if mf[2]:
+                note = f", × {mf[0]:.2f} for this machine's speed on {ranks} ranks or threads ({mf[1]} run(s))"
+                ranks_measured = True
         elif used is not None:       # an entry without a machine was fitted before entries said so: elsewhere
             whose = f"{scenes[used].machine}'s" if scenes[used].machine else "an earlier machine's"
             note = (f", {UNMEASURED_WORDS} (the table's is {whose}; 2-core machines differ by 2x): the "
@@ -533,7 +585,7 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
         if tp.max_particles and n_particles > EXTRAPOLATION_NOTE * tp.max_particles:
             basis += (f", {n_particles / tp.max_particles:.1f}x the largest run fitted ({tp.max_particles:,} "
                       "particles): an extrapolation")
-        if ranks > 1 and not tp.efficiency_measured:
+        if ranks > 1 and not tp.efficiency_measured and not ranks_measured:
             basis += (f", {ranks} ranks or threads at {ASSUMED_WORDS} {tp.parallel_efficiency:g} "
                       "(no run of this entry on several measured)")
         basis += _spread_clause(tp, plan, lead, n_particles, steps, ranks, scale)

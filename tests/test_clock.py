@@ -440,7 +440,8 @@ def test_a_complete_run_teaches_the_clock_this_machines_speed(tmp_path, monkeypa
     assert run("shared", 1.50, 4.0) is None                  # two ranks beside other runs: wall time too long
     assert machine_factor("liggghts") == (pytest.approx(0.47, rel=1e-3), 2)
     after, basis = estimate_engine_time("liggghts", "shear_cell", n, steps, 2)
-    assert after == pytest.approx(0.47 * before, rel=1e-3) and "× 0.47 for this machine's speed (2 run(s))" in basis
+    assert after == pytest.approx(0.47 * before, rel=1e-3)
+    assert "× 0.47 for this machine's speed on 2 ranks or threads (2 run(s))" in basis     # the runs had 2 ranks
     assert UNMEASURED_WORDS not in basis
     # a record names its run by its absolute path (a relative one names other runs from elsewhere)
     monkeypatch.chdir(tmp_path)
@@ -472,6 +473,39 @@ def test_this_machines_speed_is_interpolated_in_size_not_carried_across_sizes(tm
     assert machine_factor("liggghts", "shear_cell", 228) == (pytest.approx(0.30), 5)
     assert machine_factor("liggghts", "shear_cell") == (pytest.approx(0.43), 5)
     assert machine_factor("liggghts", "triaxial", 228) == (pytest.approx(0.43), 5)   # another scene: the median
+
+
+def test_this_machines_speed_on_several_threads_is_kept_apart_from_its_speed_on_one(tmp_path, monkeypatch):
+    """YADE's small shear cell (1 025 grains) took 315 s on one thread and 366 s on two (session 38,
+    quiet): 0.30 and 0.59 of the package table, whose two-thread figure divides by an assumed
+    speed-up of 1.7. One median of both (0.45) said neither. A run on two threads takes the records of
+    two-thread runs of its scene, and then says it; on one thread, or on more threads than any record
+    ran, the one-rank records (the machine's speed; the table's speed-up)."""
+    from orchestrator.clock import ASSUMED_WORDS, _package_table, machine_factor, machine_id, speed_factor
+    recs = [("shear_cell", 1025, 0.30, True, 1), ("shear_cell", 1025, 0.59, True, 2), ("shear_cell", 228, 0.41, True, None)]
+    assert speed_factor(recs, "shear_cell", 1025)[0] == pytest.approx(0.30)
+    assert speed_factor(recs, "shear_cell", 1025, ranks=2) == (pytest.approx(0.59), 1)
+    assert speed_factor(recs, "shear_cell", 1025, ranks=4) == (pytest.approx(0.30), 2)   # none ran on 4: one rank's
+    assert speed_factor(recs, "plane_shear", 150, ranks=2)[0] == pytest.approx(np.median([0.30, 0.41]))  # another scene
+    assert speed_factor([r[:4] for r in recs], "shear_cell", 1025)[0] == pytest.approx(0.445)  # rows without ranks: one group
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))
+    key = "shear_cell:smooth_sidewall"
+    (tmp_path / "speed.json").write_text(json.dumps({machine_id(): {"yade": [
+        {"run": f"r{k}", "scene": key, "n": n, "ratio": r, "quiet": True, "ranks": w}
+        for k, (_, n, r, _, w) in enumerate(recs)]}}))
+    tp = Throughput.from_dict(_package_table()["yade"][key])
+    assert not tp.efficiency_measured
+    n, steps = 1025, 355_237
+    one, basis1 = estimate_engine_time("yade", key, n, steps, 1)
+    two, basis2 = estimate_engine_time("yade", key, n, steps, 2)
+    assert one == pytest.approx(0.30 * tp.engine_time(n, steps, 1), rel=1e-3)
+    assert two == pytest.approx(0.59 * tp.engine_time(n, steps, 2), rel=1e-3)
+    assert "on 2 ranks or threads (1 run(s))" in basis2 and ASSUMED_WORDS not in basis2
+    assert "ranks or threads" not in basis1
+    assert machine_factor("yade", key, n, 2) == (pytest.approx(0.59), 1)
+    three, basis3 = estimate_engine_time("yade", key, n, steps, 3)       # no run on 3: assumed, and said
+    assert three == pytest.approx(0.30 * tp.engine_time(n, steps, 3), rel=1e-3) and ASSUMED_WORDS in basis3
 
 
 def test_a_busy_machine_is_said_and_a_quiet_one_is_not():
