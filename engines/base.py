@@ -241,10 +241,11 @@ class Engine(ABC):
     # -- running ---------------------------------------------------------------------------
     def run(self, deck: Path, case, total_steps: int, log: Path, timeout: float,
             progress: bool | str = True, env: dict | None = None, first_step: int = 0,
-            expected_steps: int | None = None) -> RunResult:
+            expected_steps: int | None = None, estimate_s: float | None = None) -> RunResult:
         """Run the engine on ``deck`` in its directory, streaming output into ``log``, with a
         progress bar (a string ``progress``: under that label) fed by the engine's step counter (toward ``expected_steps`` where the scene
-        decides its length while it runs and fewer than ``total_steps`` are expected), a wall-clock
+        decides its length while it runs and fewer than ``total_steps`` are expected; beside the clock's
+        ``estimate_s`` [s] for the whole run where the recent pace says otherwise), a wall-clock
         ``timeout`` [s] and a kill.
         The attempt's steps (from ``first_step``, the resume point) and engine time go into the run
         directory's ``attempts.json`` as it runs (:mod:`orchestrator.attempts`).
@@ -262,7 +263,7 @@ class Engine(ABC):
             proc = subprocess.Popen(cmd, cwd=run_dir, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                     env=full_env, start_new_session=True, preexec_fn=_die_with_parent)
             label = progress if isinstance(progress, str) else f"{self.name} {case.name}"     # a ladder's rung names itself
-            bar = _Progress(label, total_steps, enabled=bool(progress), expected=expected_steps)
+            bar = _Progress(label, total_steps, enabled=bool(progress), expected=expected_steps, estimate_s=estimate_s)
             attempt = AttemptRecord(run_dir, first_step, self.workers(case))
             try:
                 sel = selectors.DefaultSelector()
@@ -397,9 +398,17 @@ class _Progress:
     #: between stages (a loose packing runs fast, a sheared dense one slowly) and with the load
     #: of the machine, so the mean rate since the start under-estimates the rest
     RATE_WINDOW = 120.0
+    #: the lines give the clock's time left beside the ETA when one is more than this times the other
+    CLOCK_APART = 1.5
 
-    def __init__(self, label: str, total: int, enabled: bool = True, expected: int | None = None):
+    def __init__(self, label: str, total: int, enabled: bool = True, expected: int | None = None,
+                 estimate_s: float | None = None):
         self.p = None
+        #: the clock's engine time for the whole run [s] (orchestrator.clock, before the run): the
+        #: recent pace of a run whose steps get dearer as it goes promises too little (YADE's medium
+        #: shear cell on two threads: "ETA 23.5 min" 90 s in, at 340 steps/s in the loose packing,
+        #: against 43 steps/s at a third of the way), so the lines give both where they differ
+        self.estimate_s = float(estimate_s) if estimate_s and estimate_s > 0 else None
         self.lines = False
         if not enabled or total <= 0:
             return
@@ -454,8 +463,20 @@ class _Progress:
                 goal = self.goal(step)
                 of = f"~{goal:,} expected (at most {self.total:,})" if goal != self.total else f"{goal:,}"
                 eta = f", ETA {fmt_s((goal - step) / rate)}" if rate > 0 else ""
+                eta += self._clock_clause(step, goal, (goal - step) / rate if rate > 0 else None)
                 print(f"{self.label}: step {step:,}/{of} ({100 * step / goal:.0f} %), "
                       f"{fmt_s(now - self.t0)}{eta}", file=sys.stderr, flush=True)
+
+    def _clock_clause(self, step: int, goal: int, left_pace: float | None) -> str:
+        """" (the clock's estimate: X left)" where the clock's time for the steps left (its estimate
+        for the whole run, shared evenly over the steps) and the ETA at the recent pace differ by more
+        than :attr:`CLOCK_APART` times, or there is no pace yet; "" otherwise or without an estimate."""
+        if self.estimate_s is None or goal <= 0:
+            return ""
+        left_clock = self.estimate_s * max(goal - step, 0) / goal
+        if left_pace is not None and max(left_clock, left_pace) <= self.CLOCK_APART * min(left_clock, left_pace):
+            return ""
+        return f" (the clock's estimate: {fmt_s(left_clock)} left)"
 
     def close(self):
         if self.p is not None:

@@ -341,7 +341,7 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     t1 = time.perf_counter()
     try:
         res, resume = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress,
-                                         expected=estimated_steps)
+                                         expected=estimated_steps, estimate=estimate)
         summary["resumed_from"] = resume
     except EngineError as exc:
         unstable = read_verdict(run_dir, params["dt"], failed=True)
@@ -447,10 +447,11 @@ def _mark_unstable(run_dir, summary, unstable: dict, engine_time: float) -> RunO
     return RunOutcome(run_dir, "unstable", summary)
 
 
-def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress, expected=None):
+def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress, expected=None, estimate=None):
     """Run; if resuming from the newest restart fails (e.g. it was half-written when the run was
     killed), try the older ones, then start afresh. ``expected``: the steps the run is expected to
-    take (the progress lines count toward them)."""
+    take (the progress lines count toward them); ``estimate``: the clock's engine time for the run [s]
+    (the lines give it where the recent pace says otherwise)."""
     log = run_dir / "engine.log"
     total = params["scene"].get("total_steps", params["scene"]["steps"])
     timeout = case.engine_options.timeout
@@ -464,7 +465,7 @@ def _run_with_fallback(eng, case, params, run_dir, deck, resume, progress, expec
             # the step the attempt starts from (None: the resume point does not say, e.g. YADE's checkpoint)
             first = 0 if resume is None else resume.get("step")
             return eng.run(deck, case, total, log, timeout, progress, first_step=first,
-                           expected_steps=expected), resume
+                           expected_steps=expected, estimate_s=estimate), resume
         except EngineError:
             if resume is None:
                 raise

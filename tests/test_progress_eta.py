@@ -101,3 +101,31 @@ def test_a_resumed_run_loading_its_checkpoint_does_not_slow_its_eta(monkeypatch,
         s = int(m.group(1).replace(",", ""))
         eta = float(m.group(5)) * SECONDS[m.group(6)]
         assert abs(eta - (400_000 - s) / 100) / ((400_000 - s) / 100) < 0.05, (s, eta)
+
+
+def test_the_lines_give_the_clocks_time_left_where_the_pace_says_otherwise(monkeypatch, capsys):
+    """YADE's medium shear cell on two threads said "ETA 23.5 min" 90 s in (340 steps/s in the loose
+    packing) and ran at 43 steps/s a third of the way: the lines give the clock's time left (its
+    estimate for the run shared evenly over the steps) beside the ETA where the two differ by more
+    than 1.5x, and the ETA alone where they agree."""
+    def last_line(rate, estimate_s):
+        clock = [0.0]
+        monkeypatch.setattr(base.time, "perf_counter", lambda: clock[0])
+        p = base._Progress("run", total=100_000, estimate_s=estimate_s)
+        step = 0
+        for t in range(200):
+            clock[0] = float(t)
+            step += rate
+            p.update(step)
+        return capsys.readouterr().err.strip().splitlines()[-1]
+    line = last_line(100, 2000.0)        # 100 steps/s: 1 000 s for the run, the clock says 2 000 s
+    m = re.search(r"step ([\d,]+)/.*ETA ([\d.]+) (s|min) \(the clock's estimate: ([\d.]+) (s|min) left\)$", line)
+    assert m, line
+    step = int(m.group(1).replace(",", ""))
+    eta, left = float(m.group(2)) * SECONDS[m.group(3)], float(m.group(4)) * SECONDS[m.group(5)]
+    assert abs(eta - (100_000 - step) / 100) < 0.05 * (100_000 - step) / 100
+    assert abs(left - 2000.0 * (100_000 - step) / 100_000) < 0.01 * left
+    line = last_line(100, 1200.0)            # within 1.5x: the ETA alone
+    assert LINE.search(line) and "clock" not in line
+    line = last_line(100, None)              # no estimate: the ETA alone
+    assert LINE.search(line) and "clock" not in line
