@@ -104,8 +104,8 @@ def test_a_resumed_run_loading_its_checkpoint_does_not_slow_its_eta(monkeypatch,
 
 
 def test_the_lines_give_the_clocks_time_left_where_the_pace_says_otherwise(monkeypatch, capsys):
-    """YADE's medium shear cell on two threads said "ETA 23.5 min" 90 s in (340 steps/s in the loose
-    packing) and ran at 43 steps/s a third of the way: the lines give the clock's time left (its
+    """YADE's medium shear cell on two threads said "ETA 16.6 min" 90.3 s in (the loose packing) and
+    "ETA 2.1 h" at 33.7 min, once packed: the lines give the clock's time left (its
     estimate for the run shared evenly over the steps) beside the ETA where the two differ by more
     than 1.5x, and the ETA alone where they agree."""
     def last_line(rate, estimate_s):
