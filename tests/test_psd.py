@@ -2,6 +2,7 @@
 plane-shear and shear-cell scenes (by median) and the triaxial scene (by truncated mean)."""
 import math
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -155,7 +156,6 @@ def test_the_dense_packing_is_the_same_with_or_without_avx512():
     triaxial smoke's trajectory apart after them (session 37). The packer now cubes with
     ``portable_cube``: the same packing with NumPy's AVX-512 dispatch on (where the CPU has it) and
     off (``NPY_DISABLE_CPU_FEATURES``, as on the machines without it)."""
-    import subprocess      # here: the only test of this file that starts a process
     off = "AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR X86_V4"
     digests = []
     for disabled in ("", off):
