@@ -431,9 +431,10 @@ class _Progress:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
             self.p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                              TimeElapsedColumn(), TimeRemainingColumn(), transient=True)
+                              TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[clock]}"),
+                              transient=True, get_time=lambda: time.perf_counter())    # the lines' clock
             self.p.start()
-            self.task = self.p.add_task(label, total=self.expected or total)
+            self.task = self.p.add_task(label, total=self.expected or total, clock="")
         except Exception:
             self.p = None
 
@@ -446,7 +447,10 @@ class _Progress:
         """Show ``step``; ``reported``: the engine has just said it (False: the lines go on while the
         engine is quiet, e.g. loading a resumed run's checkpoint, which the step rate must not count)."""
         if self.p is not None:
-            self.p.update(self.task, completed=step, total=self.goal(step))
+            goal = self.goal(step)
+            self.p.update(self.task, completed=step, total=goal)
+            task = next(t for t in self.p.tasks if t.id == self.task)
+            self.p.update(self.task, clock=self._clock_clause(step, goal, task.time_remaining))
         elif self.lines:
             now = time.perf_counter()
             if self.first is None and reported and step > 0:   # the first report (a resumed run starts late)

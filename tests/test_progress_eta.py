@@ -129,3 +129,26 @@ def test_the_lines_give_the_clocks_time_left_where_the_pace_says_otherwise(monke
     assert LINE.search(line) and "clock" not in line
     line = last_line(100, None)              # no estimate: the ETA alone
     assert LINE.search(line) and "clock" not in line
+
+
+def test_the_terminal_bar_gives_the_clocks_time_left_too(monkeypatch):
+    """On a terminal the rich bar's own time remaining follows the pace; a column beside it gives the
+    clock's time left where the two differ by more than 1.5x, as the off-terminal lines do."""
+    clock = [0.0]
+    monkeypatch.setattr(base.time, "perf_counter", lambda: clock[0])
+    monkeypatch.setattr(base.sys.stderr, "isatty", lambda: True)
+    p = base._Progress("run", total=100_000, estimate_s=2000.0)
+    assert p.p is not None
+    try:
+        step = 0
+        for t in range(200):
+            clock[0] = float(t)
+            step += 100
+            p.update(step)
+        task = p.p.tasks[0]
+        left = task.time_remaining
+        assert left is not None and abs(left - (100_000 - step) / 100) < 0.1 * left      # rich: the pace's
+        m = re.fullmatch(r" \(the clock's estimate: ([\d.]+) (s|min) left\)", task.fields["clock"])
+        assert m and abs(float(m.group(1)) * SECONDS[m.group(2)] - 2000.0 * (100_000 - step) / 100_000) < 0.01 * 2000
+    finally:
+        p.close()
