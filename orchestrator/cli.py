@@ -134,7 +134,7 @@ def cmd_clock(args) -> int:
     """``orchestrator clock show|refresh``: the fitted cost model per engine and scene."""
     from rich.table import Table
     from .clock import (load_table, machine_factor, machine_id, package_table_path, refresh, samples_from_runs,
-                        speed_table_path, user_table_path)
+                        speed_records, speed_table_path, user_table_path)
     con = console()
     if args.action == "refresh":
         missing = [r for r in args.runs if not Path(r).exists()]
@@ -174,6 +174,16 @@ def cmd_clock(args) -> int:
     how = ("; ".join(said) + " of the package table's times (medians; an estimate takes its scene's runs at "
            "its size, orchestrator.clock.speed_factor)") if said else "no complete run recorded yet"
     con.print(f"this machine ({machine_id()}): {how} ({speed_table_path()})", markup=False)
+    records = speed_records()
+    if records:
+        r = Table(title="this machine's runs: engine time over the package table's prediction")
+        for col in ("engine", "scene", "particles", "ranks/threads", "ratio", "quiet", "run"):
+            r.add_column(col)
+        for rec in records:
+            quiet = {True: "yes", False: "no"}.get(rec.get("quiet"), "-")
+            r.add_row(rec["engine"], str(rec.get("scene")), f"{rec['n']:,}" if rec.get("n") else "-",
+                      str(rec.get("ranks") or 1), f"{rec['ratio']:.3f}", quiet, str(rec.get("run", "")))
+        con.print(r)
     return 0
 
 

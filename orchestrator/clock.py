@@ -77,7 +77,7 @@ __all__ = ["Throughput", "RunSample", "load_table", "estimate_engine_time", "eng
            "samples_from_runs", "fit", "planned_steps",
            "refresh", "user_table_path", "package_table_path", "ASSUMED_PARALLEL_EFFICIENCY", "SPREAD_WORDS",
            "UNMEASURED_WORDS",
-           "machine_id", "record_speed", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
+           "machine_id", "record_speed", "speed_records", "machine_factor", "speed_factor", "speed_at_size", "speed_table_path",
            "speed_ratio", "run_engine_seconds", "clock_key", "base_kind", "key_fallbacks", "table_entry", "table_entry_key"]
 
 #: parallel efficiency used until a run on several ranks/threads has been measured
@@ -313,6 +313,14 @@ def _speed_table() -> dict:
         return json.loads(p.read_text()) if p.is_file() else {}
     except (OSError, ValueError):
         return {}
+
+
+def speed_records() -> list[dict]:
+    """This machine's speed records (:func:`record_speed`), each with its ``engine``: what ``orchestrator
+    clock show`` lists under the factors (run, scene, particles, ranks or threads, ratio to the
+    package table, whether the machine was quiet)."""
+    rows = _speed_table().get(machine_id(), {})
+    return [dict(r, engine=eng) for eng, recs in sorted(rows.items()) for r in recs]
 
 
 def speed_ratio(smp: RunSample, package: dict | None = None) -> float | None:

@@ -774,3 +774,21 @@ def test_clock_refresh_takes_its_options_before_or_after_the_runs():
     assert args.runs == ["runs"] and not args.add
     args = build_parser(["clock", "show"]).parse_args(["clock", "show"])
     assert args.action == "show" and args.func.__name__ == "cmd_clock"
+
+
+def test_clock_show_lists_this_machines_runs(tmp_path, monkeypatch, capsys):
+    """`orchestrator clock show` lists the runs behind this machine's factors, each with its ranks or
+    threads and its ratio to the package table (the figures docs/validation.md quotes: YADE's small
+    shear cell 0.301 on one thread, 0.593 on two, session 38)."""
+    from orchestrator.cli import main
+    from orchestrator.clock import machine_id
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))
+    monkeypatch.setenv("COLUMNS", "250")
+    (tmp_path / "speed.json").write_text(json.dumps({machine_id(): {"yade": [
+        {"run": "/r/one", "scene": "shear_cell:smooth_sidewall", "n": 1025, "ratio": 0.3006, "quiet": True, "ranks": 1},
+        {"run": "/r/two", "scene": "shear_cell:smooth_sidewall", "n": 1025, "ratio": 0.5932, "quiet": True, "ranks": 2}]}}))
+    assert main(["clock", "show"]) == 0
+    rows = [l for l in capsys.readouterr().out.splitlines() if "/r/" in l]
+    cells = [[c.strip() for c in l.split("│")[1:-1]] for l in rows]
+    assert [c[3:6] + [c[6]] for c in cells] == [["1", "0.301", "yes", "/r/one"], ["2", "0.593", "yes", "/r/two"]]
