@@ -3,7 +3,6 @@ is a failure, not a skip (the README's set-up command installs all three)."""
 from __future__ import annotations
 
 import os
-import shutil
 import tempfile
 from pathlib import Path
 
