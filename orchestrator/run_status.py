@@ -18,8 +18,8 @@ The time left comes two ways, neither exact (docs/validation.md, the clock):
   pace for a record without one, or whose last 10 minutes made no step). A later stage that costs
   more per step (a shear cell's shear stage after its compression, where the grains are denser and
   touch more; a triaxial's loading after its drag-held stage 1) makes the true figure longer;
-- ``left_clock_s``: the clock's estimate before the run times the share of the steps left
-  (:mod:`orchestrator.clock`), which knows nothing of how this run has gone so far.
+- ``left_clock_s``: the clock's estimate before the latest attempt times the share of the steps
+  left (:mod:`orchestrator.clock`), which knows nothing of how this run has gone so far.
 
 A scene that decides its step count while it runs (a triaxial's stage 1 ends when the sample has
 converged) has a budget of steps it may take and fewer it is expected to take (what the engine's
@@ -105,7 +105,8 @@ def run_status(run_dir) -> dict:
     - ``pace``: steps per engine second of the latest attempt, over its last 10 minutes [1/s];
     - ``left_pace_s``, ``left_clock_s``: the engine time left [s] at that pace and by the clock's
       estimate before the run (the module docstring); 0 for a complete run;
-    - ``estimated_s``: the clock's estimate of the whole run before it started [s].
+    - ``estimated_s``: the clock's estimate of the whole run before its first attempt [s] (the
+      latest attempt's, which ``left_clock_s`` takes, knows more of the machine).
     """
     run_dir = Path(run_dir)
     s = read_summary(run_dir) or {}
@@ -117,6 +118,8 @@ def run_status(run_dir) -> dict:
     reached = max((a["last_step"] for a in attempts if isinstance(a.get("last_step"), int)), default=None)
     est = s.get("estimated_engine_time_s")
     est = float(est) if isinstance(est, (int, float)) else nan
+    first = s.get("first_estimated_engine_time_s")
+    first = float(first) if isinstance(first, (int, float)) else est
     pace = _latest_pace(attempts)
     if status == "complete":
         reached = steps
@@ -133,7 +136,7 @@ def run_status(run_dir) -> dict:
         "n_particles": s.get("n_particles"), "step": reached, "steps": steps, "steps_expected": expected,
         "done": reached / expected if expected and reached is not None else nan,
         "attempts": len(attempts), "engine_s": nan if spent is None else float(spent), "pace": pace,
-        "left_pace_s": left_pace, "left_clock_s": left_clock, "estimated_s": est,
+        "left_pace_s": left_pace, "left_clock_s": left_clock, "estimated_s": first,
     }
 
 

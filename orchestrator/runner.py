@@ -325,6 +325,9 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         "stability": {k: thaw(params.stability[k]) for k in ("limits", "fractions", "binding", "dt_max_safe", "ok",
                                                              "forced")} if params.stability is not None else None,
         "estimated_engine_time_s": estimate,
+        # the estimate before the run's first attempt (a resumed attempt's own, above, knows more
+        # of the machine: the results table gives both)
+        "first_estimated_engine_time_s": _first_estimate(prior, resume, estimate),
         # the steps that estimate is for (a triaxial's stage 1: what the engine's measured runs took)
         "estimated_steps": estimated_steps,
         # what the run-time model (orchestrator.clock) is fitted on
@@ -343,6 +346,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
         res, resume = _run_with_fallback(eng, case, params, run_dir, deck, resume, progress,
                                          expected=estimated_steps, estimate=estimate)
         summary["resumed_from"] = resume
+        if resume is None:                  # the resume failed and the run started afresh
+            summary["first_estimated_engine_time_s"] = estimate
     except EngineError as exc:
         unstable = read_verdict(run_dir, params["dt"], failed=True)
         if unstable is not None:
@@ -394,6 +399,16 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     except (OSError, ValueError, TypeError) as exc:
         _say(f"the run's speed was not recorded for the run-time estimates: {exc}")
     return RunOutcome(run_dir, "complete", summary)
+
+
+def _first_estimate(prior: dict, resume: dict | None, estimate: float | None) -> float | None:
+    """The clock's estimate of the whole run's engine time [s] before its first attempt: this
+    attempt's ``estimate`` on a fresh start, the earlier summary's on a resume (for a summary written
+    before it kept one, its last attempt's estimate: the earliest left)."""
+    if resume is None:
+        return estimate
+    first = prior.get("first_estimated_engine_time_s", prior.get("estimated_engine_time_s"))
+    return first if isinstance(first, (int, float)) else estimate
 
 
 def _say(msg: str) -> None:

@@ -10,7 +10,7 @@ import pandas as pd
 import yaml
 
 from orchestrator.registry import get_scene
-from orchestrator.results import format_measure, key_results, results_frame
+from orchestrator.results import estimate_note, format_measure, key_results, results_frame
 
 
 def test_format_measure_keeps_two_significant_digits_of_the_error():
@@ -89,6 +89,24 @@ def test_engine_time_of_a_resumed_run_says_it_covers_only_the_last_part(tmp_path
     (run / "summary.json").write_text(json.dumps(s))
     rows = {r.quantity: r for r in key_results(run)}
     assert rows["engine time"].seed.startswith("the whole run, 2 attempts")
+
+
+def test_a_resumed_run_keeps_the_estimate_made_before_its_first_attempt(tmp_path):
+    # the YADE medium shear cell of session 38: estimated 89.3 min before the run; its resumed attempt,
+    # with more of the machine's speed records, estimated the whole run at 118.6 min
+    run = _fake_shear_cell_run(tmp_path)
+    s = json.loads((run / "summary.json").read_text())
+    s.update(estimated_engine_time_s=7115.0, first_estimated_engine_time_s=5358.0,
+             resumed_from={"step": 378189})
+    (run / "summary.json").write_text(json.dumps(s))
+    assert estimate_note(s) == "estimated 5358 s before the run (7115 s before its last attempt)"
+    rows = {r.quantity: r for r in key_results(run)}
+    assert rows["engine time"].seed.endswith("estimated 5358 s before the run (7115 s before its last attempt)")
+    s["first_estimated_engine_time_s"] = 7115.2         # the same estimate: said once
+    assert estimate_note(s) == "estimated 7115 s before the run"
+    del s["first_estimated_engine_time_s"]              # a summary from before the first was kept
+    assert estimate_note(s) == "estimated 7115 s before the run"
+    assert estimate_note({}) == ""
 
 
 def test_no_band_is_said_not_hidden(tmp_path):

@@ -65,6 +65,7 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
             time.sleep(0.05)
         assert proc.poll() is None, "the run ended before it could be killed: make the case longer"
     kill_run(proc, run_dir)
+    first_estimate = json.loads((run_dir / "summary.json").read_text())["estimated_engine_time_s"]
     st = run_status(run_dir)                      # what `orchestrator status` prints of it
     assert st["status"] == "interrupted" and st["attempts"] == 1 and st["engine_s"] > 0
     assert 0 < st["step"] < st["steps"] and 0 < st["done"] < 1 and st["left_pace_s"] > 0
@@ -74,6 +75,8 @@ def test_killed_run_resumes(engine, tmp_path, engines_installed):
     summary = json.loads((run_dir / "summary.json").read_text())
     att = summary["attempts"]
     assert len(att) == 2 and att[0]["first_step"] == 0 and not att[0]["done"] and att[1]["done"]
+    # the estimate made before the first attempt is kept beside the resumed attempt's own
+    assert first_estimate > 0 and summary["first_estimated_engine_time_s"] == first_estimate
     assert 0 < att[0]["last_step"] and 0 < att[1]["first_step"] < att[1]["last_step"] == summary["steps_run"]
     assert all(a["wall_s"] > 0 and a["cpu_s"] > 0 for a in att)
     cost = run_cost(att, summary["steps_run"], use_cpu=True)

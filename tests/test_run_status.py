@@ -46,6 +46,14 @@ def test_interrupted_run_steps_time_so_far_and_left(tmp_path):
     assert st["pace"] == pytest.approx(600 / 5.0)     # the latest attempt's steps per CPU second
     assert st["left_pace_s"] == pytest.approx(1500 / 120.0)
     assert st["left_clock_s"] == pytest.approx(60.0 * 1500 / 3000)
+    assert st["estimated_s"] == 60.0
+
+
+def test_the_time_left_takes_the_latest_estimate_and_the_whole_run_the_first(tmp_path):
+    d = write_run(tmp_path / "runs" / "c" / "yade-1", {"status": "running", "steps": 3000, "estimated_engine_time_s": 80.0,
+                                                        "first_estimated_engine_time_s": 60.0}, KILLED_TWICE)
+    st = run_status(d)
+    assert st["left_clock_s"] == pytest.approx(80.0 * 1500 / 3000) and st["estimated_s"] == 60.0
 
 
 def test_a_stage_that_ends_when_converged_counts_the_expected_steps(tmp_path):

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..clock import run_step_plan
-from ..results import key_results
+from ..results import estimate_note, key_results
 from ..analysis.plots import _fig
 from ..frames import Frames
 from ..runner import analyze_run
@@ -341,9 +341,8 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
     if wt:
         body.append("<h2>Run time</h2>" + _kv({k: (f"{v:.3f} s" if isinstance(v, (int, float)) else v) for k, v in wt.items()}))
         body.append(_img(fig_to_data_uri(_walltime_fig(wt)), "wall-time split"))
-        if "estimated_engine_time_s" in summary:
-            body.append(f"<p class='muted'>estimated engine time before the run: "
-                        f"{summary['estimated_engine_time_s']:.3g} s</p>")
+        if estimate_note(summary):
+            body.append(f"<p class='muted'>engine time {_e(estimate_note(summary))}</p>")
     if case_text:
         body.append("<h2>Resolved case</h2><details><summary>case.yaml</summary><pre>" + _e(case_text) + "</pre></details>")
     out = Path(out) if out else run_dir / "report.html"
