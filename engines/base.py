@@ -304,8 +304,11 @@ class Engine(ABC):
                 attempt.close(step, usage[0] if usage else None,
                               done=proc.returncode == 0 and not timed_out)
         wall = time.perf_counter() - t0
+        extra = {"cpu_s": usage[0]} if usage else {}
+        if attempt.entry["paused_s"]:
+            extra["paused_s"] = attempt.entry["paused_s"]      # wall time stopped (SIGSTOP, a suspend) [s]
         res = RunResult(proc.returncode if proc.returncode is not None else -9, wall, step, log, timed_out,
-                        extra={"cpu_s": usage[0]} if usage else {})
+                        extra=extra)
         if timed_out:
             raise EngineError(f"{self.name} exceeded its wall-clock limit of {timeout:.0f} s and was killed "
                               f"(engine_options.timeout).\n{tail(log)}")

@@ -20,7 +20,12 @@ quiet machine's (``benchmarks/bench_estimate.py`` marks it). ``recent`` holds th
 time of the attempt's latest :attr:`AttemptRecord.WINDOW` seconds (10 min), from the first report
 of one step to that of another: the pace now, which ``orchestrator status`` divides the steps left
 by (a run slows as a shear cell's sample densifies; a stretch that shared the machine or was paused
-with SIGSTOP weighs on it for one window, not for the rest of the attempt). A fresh start clears the file.
+with SIGSTOP weighs on it for one window, not for the rest of the attempt). ``paused_s`` is the
+wall time the engine spent stopped: every stretch between two writes in which its processes used
+less than :data:`IDLE_CPU_SHARE` of a core (SIGSTOP, a scheduler's suspend such as Slurm's
+``scontrol suspend``; a rank waiting for another polls, so it counts as running). The attempt's
+engine time on several ranks is its wall time less that (:func:`attempt_wall_seconds`). A fresh
+start clears the file.
 
 :func:`run_cost` turns the record into the engine time an uninterrupted run would have taken: each
 attempt's time scaled by the share of its steps that were new (a resume repeats the steps since the
@@ -38,10 +43,14 @@ import psutil
 
 from .atomic import write_json
 
-__all__ = ["AttemptRecord", "read_attempts", "run_cost", "clear_attempts", "FILE"]
+__all__ = ["AttemptRecord", "read_attempts", "run_cost", "clear_attempts", "attempt_wall_seconds", "FILE"]
 
 #: the record's file name in a run directory
 FILE = "attempts.json"
+
+#: CPU time [share of one core] below which the engine's processes count as paused over a stretch
+#: between two writes: a running engine, even one waiting on another rank, uses a whole core
+IDLE_CPU_SHARE = 0.02
 
 def read_attempts(run_dir) -> list[dict]:
     """The attempts recorded in ``run_dir`` (oldest first); [] when none or unreadable."""
@@ -50,6 +59,16 @@ def read_attempts(run_dir) -> list[dict]:
     except (OSError, ValueError):
         return []
     return data if isinstance(data, list) else []
+
+
+def attempt_wall_seconds(a: dict) -> float | None:
+    """An attempt's wall time [s] with its paused stretches (``paused_s``) taken out; None when not
+    recorded."""
+    wall = a.get("wall_s")
+    if not isinstance(wall, (int, float)):
+        return None
+    paused = a.get("paused_s")
+    return max(float(wall) - (float(paused) if isinstance(paused, (int, float)) else 0.0), 0.0)
 
 
 def clear_attempts(run_dir) -> None:
@@ -101,7 +120,9 @@ class AttemptRecord:
         self.next = self.t0 + self.EVERY
         first = None if first_step is None else int(first_step)
         self.entry = {"first_step": first, "last_step": first, "wall_s": 0.0,
-                      "cpu_s": None, "ranks": int(ranks), "load": None, "cores": os.cpu_count(), "done": False}
+                      "cpu_s": None, "ranks": int(ranks), "load": None, "cores": os.cpu_count(), "done": False,
+                      "paused_s": 0.0}
+        self._last_cpu: tuple[float, float] | None = None     # (wall [s], CPU [s]) at the last write
         self._load_sum, self._load_n = 0.0, 0
         self._samples: deque = deque()      # (wall [s], step, cpu [s] or None) at each write
         self.earlier = read_attempts(run_dir)
@@ -133,9 +154,19 @@ class AttemptRecord:
         if pid is not None:
             cpu = process_tree_cpu_seconds(pid)
             if cpu is not None:
+                self._note_pause(self.entry["wall_s"], cpu)
                 self.entry["cpu_s"] = cpu
         self._note_recent()
         self._write()
+
+    def _note_pause(self, wall: float, cpu: float) -> None:
+        """Count the stretch since the last write as paused when the engine's processes used less
+        than IDLE_CPU_SHARE of a core in it (``wall``, ``cpu``: the attempt's times so far [s])."""
+        if self._last_cpu is not None:
+            dw, dc = wall - self._last_cpu[0], cpu - self._last_cpu[1]
+            if dw > 0 and dc < IDLE_CPU_SHARE * dw:
+                self.entry["paused_s"] = round(self.entry["paused_s"] + dw, 3)
+        self._last_cpu = (wall, cpu)
 
     def _note_recent(self) -> None:
         """Record the steps, wall and CPU time between the first reports of two steps, the latest
@@ -189,7 +220,8 @@ GAP_TOLERANCE = 0.02
 
 def run_cost(attempts: list[dict], steps_run: int, use_cpu: bool) -> float | None:
     """Engine time [s] an uninterrupted run of ``steps_run`` steps would have taken, from the record
-    of its attempts: each attempt's CPU time (``use_cpu``, where recorded) or wall time, times the
+    of its attempts: each attempt's CPU time (``use_cpu``, where recorded) or wall time (its paused
+    stretches out: :func:`attempt_wall_seconds`), times the
     share of its steps that were new, summed (a gap of up to :data:`GAP_TOLERANCE` of the run
     between two attempts counted at the later one's rate). None when the record does not start at
     step 0, leaves a larger gap, stops short of ``steps_run`` by more than that, or has an attempt
@@ -203,7 +235,7 @@ def run_cost(attempts: list[dict], steps_run: int, use_cpu: bool) -> float | Non
         first, last = a.get("first_step"), a.get("last_step")
         if first is None and last is None:
             continue                     # killed before its first step: start-up an uninterrupted run has once
-        t = a.get("cpu_s") if use_cpu and a.get("cpu_s") else a.get("wall_s")
+        t = a.get("cpu_s") if use_cpu and a.get("cpu_s") else attempt_wall_seconds(a)
         if not isinstance(first, int) or not isinstance(last, int) or not isinstance(t, (int, float)) or t <= 0:
             return None
         if first - reached > GAP_TOLERANCE * steps_run:

@@ -628,11 +628,14 @@ def engine_seconds(summary: dict) -> float | None:
     load; its CPU time is not, to within 8-36 % on a 2-core machine (docs/validation.md). Not so on
     several MPI ranks: a rank polls while it waits for one the load has descheduled (the default
     case, 2 ranks: 201 s quiet; beside a YADE run 636 s wall and 806 s CPU, 403 s per rank), so
-    their wall time is kept."""
+    their wall time is kept, less the stretches the engine spent stopped (``wall_time.engine_paused``:
+    SIGSTOP, a scheduler's suspend; :mod:`orchestrator.attempts`)."""
     wt = summary.get("wall_time") or {}
-    wall, cpu = wt.get("engine"), wt.get("engine_cpu")
+    wall, cpu, paused = wt.get("engine"), wt.get("engine_cpu"), wt.get("engine_paused")
     if not isinstance(wall, (int, float)):
         return None
+    if isinstance(paused, (int, float)) and 0 < paused < wall:
+        wall = wall - paused
     if isinstance(cpu, (int, float)) and cpu > 0 and max(int(summary.get("workers") or 1), 1) == 1:
         return min(float(cpu), float(wall))
     return float(wall)
@@ -706,7 +709,7 @@ def _sample(run_dir: Path) -> RunSample | None:
         return RunSample(s["engine"], key, n, steps, ranks, cost, max(cost - startup, 0.0), str(run_dir), plan,
                          load, cores)
     quiet_s = engine_seconds(s)
-    if quiet_s < engine_s:          # a one-rank run's CPU time (engine_seconds)
+    if quiet_s < engine_s:          # a one-rank run's CPU time, or the wall time less its pauses (engine_seconds)
         engine_s = quiet_s
         loop = engine_s - startup if startup < engine_s else engine_s
     return RunSample(s["engine"], key, n, steps, ranks, engine_s, loop, str(run_dir), plan, load, cores)

@@ -228,27 +228,44 @@ def key_results(run_dir) -> list[KeyResult]:
     wt = (summary.get("wall_time") or {}).get("engine")
     if isinstance(wt, (int, float)):
         note = estimate_note(summary)
+        paused = paused_seconds(summary)
+        paused_words = f"{format_measure(paused, None, 's')} of it paused (the engine stopped)"
         resumed = summary.get("resumed_from") or {}
         if resumed:
             # the summary's engine time covers only the last attempt; the record of every attempt
-            # (orchestrator.attempts) gives the whole run's, with the steps a resume repeated taken out
+            # (orchestrator.attempts) gives the whole run's, with the steps a resume repeated and the
+            # attempts' paused stretches taken out
             attempts = summary.get("attempts") or []
             whole = run_cost(attempts, int(summary.get("steps_run") or 0), use_cpu=False)
             start = resumed.get("step") if isinstance(resumed, dict) else None
             where = f"resumed from step {start}" if start is not None else "resumed"
             if whole is not None:
                 note = (f"the whole run, {len(attempts)} attempts (the last, {where}, {wt:.0f} s)"
+                        + (f", not counting {format_measure(paused, None, 's')} paused" if paused else "")
                         + (f"; {note}" if note else ""))
-                wt = whole
+                wt, paused = whole, 0.0
             else:          # no complete record (a run from before it existed)
                 note = f"{where}: this part only" + (f"; the whole run was {note}" if note else "")
+        if paused:
+            note = paused_words + (f"; {note}" if note else "")
         # a one-rank run's CPU time (the figure the clock learns from): its wall time also holds
-        # whatever waiting for a shared core or pausing the attempts met; on several ranks the two agree
+        # whatever waiting for a shared core or pausing the attempts met; on several ranks the
+        # wall time less the pauses (a rank polls while it waits)
         quiet = run_engine_seconds(run_dir, summary)
         if quiet is not None and quiet < wt:
-            note = f"{format_measure(quiet, None, 's')} of CPU" + (f"; {note}" if note else "")
+            what = "of CPU" if max(int(summary.get("workers") or 1), 1) == 1 else "running"
+            note = f"{format_measure(quiet, None, 's')} {what}" + (f"; {note}" if note else "")
         rows.append(KeyResult("engine time", float(wt), "s", None, "", note))
     return rows
+
+
+def paused_seconds(summary: dict) -> float:
+    """The wall time [s] the run's engine spent stopped (SIGSTOP, a scheduler's suspend), over every
+    attempt on record (:mod:`orchestrator.attempts`), else the summary's last attempt; 0 without."""
+    attempts = summary.get("attempts") or []
+    if attempts:
+        return float(sum(a.get("paused_s") or 0.0 for a in attempts if isinstance(a, dict)))
+    return float((summary.get("wall_time") or {}).get("engine_paused") or 0.0)
 
 
 def estimate_note(summary: dict) -> str:

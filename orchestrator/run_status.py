@@ -33,7 +33,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from .attempts import read_attempts
+from .attempts import attempt_wall_seconds, read_attempts
 from .clock import run_engine_seconds
 from .run_summary import read_summary
 
@@ -68,11 +68,11 @@ def find_runs(paths) -> list[Path]:
 def _attempt_seconds(a: dict) -> float | None:
     """An attempt's engine time [s]: its CPU time on one rank (what the clock fits; the wall time
     of a run that shared its cores is longer), its wall time on several (a rank polls while it
-    waits); None when not recorded."""
-    cpu, wall = a.get("cpu_s"), a.get("wall_s")
+    waits), its paused stretches out; None when not recorded."""
+    cpu, wall = a.get("cpu_s"), attempt_wall_seconds(a)
     if int(a.get("ranks") or 1) == 1 and isinstance(cpu, (int, float)) and cpu > 0:
         return float(cpu)
-    return float(wall) if isinstance(wall, (int, float)) and wall > 0 else None
+    return wall if wall else None
 
 
 def _latest_pace(attempts: list[dict]) -> float:

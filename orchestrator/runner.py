@@ -360,6 +360,8 @@ def _run_locked(case, eng, engine_name, version, run_dir, dry_run, progress, ana
     timings["engine"] = time.perf_counter() - t1
     if res.extra.get("cpu_s") is not None:
         timings["engine_cpu"] = res.extra["cpu_s"]      # CPU time of the engine and its ranks [s]
+    if res.extra.get("paused_s"):
+        timings["engine_paused"] = res.extra["paused_s"]    # of the engine's wall time, stopped [s] (attempts.py)
     unstable = read_verdict(run_dir, params["dt"])
     if unstable is not None:
         return _mark_unstable(run_dir, summary, unstable, timings["engine"])

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
 
 import pytest
 
-from orchestrator.attempts import AttemptRecord, process_tree_cpu_seconds, read_attempts, run_cost
+from orchestrator.attempts import AttemptRecord, attempt_wall_seconds, process_tree_cpu_seconds, read_attempts, run_cost
 
 
 def _a(first, last, t, done=False):
@@ -79,6 +80,44 @@ def test_the_record_follows_a_real_process(tmp_path, monkeypatch):
     # the machine's load while the first attempt ran, beside its cores (a shared machine: its wall time is long)
     assert att[0]["load"] >= 0 and att[0]["cores"] == os.cpu_count()
     assert oct(os.stat(tmp_path / "attempts.json").st_mode & 0o777) == oct(0o666 & ~_umask())
+
+
+def test_a_stopped_engine_is_counted_paused_and_its_pause_left_out_of_the_cost(tmp_path, monkeypatch):
+    """A process computing, stopped with SIGSTOP for 1.5 s (as `kill -STOP` or Slurm's suspend do),
+    then computing again: the record counts the stop as paused, and the attempt's engine time on
+    several ranks (its wall time) leaves it out; its CPU time never held it."""
+    monkeypatch.setattr(AttemptRecord, "EVERY", 0.1)
+    proc = subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
+    try:
+        rec = AttemptRecord(tmp_path, 0, ranks=2)
+
+        def run_for(seconds, step):
+            t = time.perf_counter()
+            while time.perf_counter() - t < seconds:
+                rec.update(step, proc.pid)
+                time.sleep(0.02)
+
+        run_for(1.0, 100)
+        assert rec.entry["paused_s"] < 0.2                   # computing: not paused
+        os.kill(proc.pid, signal.SIGSTOP)
+        run_for(1.5, 100)
+        os.kill(proc.pid, signal.SIGCONT)
+        run_for(1.0, 200)
+    finally:
+        proc.kill()
+        proc.wait()
+    rec.close(200, None, done=True)
+    a = read_attempts(tmp_path)[0]
+    assert 1.2 < a["paused_s"] < 1.8 and 3.4 < a["wall_s"] < 4.0
+    assert attempt_wall_seconds(a) == pytest.approx(a["wall_s"] - a["paused_s"])
+    assert run_cost([a], 200, use_cpu=False) == pytest.approx(a["wall_s"] - a["paused_s"])
+
+
+def test_a_pause_is_taken_out_of_the_whole_runs_cost_and_a_records_without_one_are_kept():
+    att = [{**_a(0, 600, 16.0), "paused_s": 10.0}, _a(400, 1000, 6.0, True)]      # 6 s computing, 10 s stopped
+    assert run_cost(att, 1000, use_cpu=False) == pytest.approx(6.0 + 6.0 * 400 / 600)
+    assert attempt_wall_seconds(_a(0, 600, 16.0)) == 16.0                           # a record from before
+    assert attempt_wall_seconds({"wall_s": None}) is None
 
 
 def test_the_recent_pace_spans_the_latest_window(tmp_path, monkeypatch):

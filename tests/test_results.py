@@ -10,6 +10,7 @@ import pandas as pd
 import yaml
 
 from orchestrator.registry import get_scene
+from orchestrator.clock import engine_seconds
 from orchestrator.results import estimate_note, format_measure, key_results, results_frame
 
 
@@ -107,6 +108,19 @@ def test_a_resumed_run_keeps_the_estimate_made_before_its_first_attempt(tmp_path
     del s["first_estimated_engine_time_s"]              # a summary from before the first was kept
     assert estimate_note(s) == "estimated 7115 s before the run"
     assert estimate_note({}) == ""
+
+
+def test_a_paused_engine_is_said_and_the_clock_counts_it_running(tmp_path):
+    # two ranks, 200 s of wall time of which the engine spent 50 s stopped (SIGSTOP, a suspend)
+    run = _fake_shear_cell_run(tmp_path)
+    s = json.loads((run / "summary.json").read_text())
+    s["workers"] = 2
+    s["wall_time"]["engine_paused"] = 50.0
+    (run / "summary.json").write_text(json.dumps(s))
+    row = {r.quantity: r for r in key_results(run)}["engine time"]
+    assert row.value == 200.0
+    assert row.seed == "150 s running; 50 s of it paused (the engine stopped); estimated 180 s before the run"
+    assert engine_seconds(s) == 150.0
 
 
 def test_no_band_is_said_not_hidden(tmp_path):
