@@ -41,6 +41,7 @@ from scipy.special import erf
 from orchestrator.analysis import density_profile, parse_specs
 from orchestrator.case import load_case
 from orchestrator.frames import Frames
+from orchestrator.results import key_results
 
 SEED_BAND_WIDTH_X50 = 8.0          # seed 000, §4: steady band width ≈ 8 x50
 SEED_DILATION_ZONE = 0.2e-3        # seed 000, Fig. 2: dilation within 0.2 mm above the lower vanes [m]
@@ -52,6 +53,12 @@ def vane_top(frames: Frames, geometry: dict, vane_height: float, time: float) ->
     w = frames.wall("lower_piston")
     travel = float(np.interp(time, w["time"].to_numpy(), w["position_z"].to_numpy()))
     return geometry["z_lower_face"] + vane_height + travel
+
+
+def engine_time_row(run_dir):
+    """The results table's engine-time row (the whole run's, a resumed one from its attempts, and
+    the estimate before it: orchestrator.results.key_results), or None."""
+    return next((r for r in key_results(run_dir) if r.quantity == "engine time"), None)
 
 
 def report(run_dir: Path) -> dict:
@@ -71,7 +78,7 @@ def report(run_dir: Path) -> dict:
     z0_first, z0_last = vane_top(fr, g, vane_height, times[first]), vane_top(fr, g, vane_height, times[last])
     z_upper_tips = g["z_upper_face"] - vane_height
     out = {"run": run_dir.name, "engine": case["engine"], "case": case["case"], "n": fr.n_particles, "x50": x50,
-           "engine_s": case["wall_time"]["engine"], "engine_cpu_s": case["wall_time"].get("engine_cpu")}
+           "engine_time": engine_time_row(run_dir)}
     if len(steady):
         z_sb = steady["z_sb"].to_numpy() - z0_last
         w_sb = steady["w_sb"].to_numpy()
@@ -170,8 +177,9 @@ def main(argv=None) -> int:
         r = report(run)
         x50 = r["x50"]
         um = 1e6
-        print(f"\n{r['case']} on {r['engine']} ({r['run']}), {r['n']} grains, x50 = {x50 * um:.0f} µm, engine "
-              f"{r['engine_s']:.0f} s" + (f" (CPU {r['engine_cpu_s']:.0f} s)" if r.get("engine_cpu_s") else ""))
+        et = r["engine_time"]
+        print(f"\n{r['case']} on {r['engine']} ({r['run']}), {r['n']} grains, x50 = {x50 * um:.0f} µm"
+              + (f", engine time {et.text()}" + (f" ({et.seed})" if et.seed else "") if et else ""))
         print("| seed 000 | this run |\n|---|---|")
         ok = abs(r["compression_error"]) <= 0.02
         print(f"| (normal load 0.5 kPa) | servo force at the end of compression {100 * r['compression_error']:+.1f} % "
