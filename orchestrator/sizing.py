@@ -89,6 +89,9 @@ def estimate(case, params: dict, engine: str) -> dict:
     # a scene that decides its step count while it runs (triaxial stage 1): the steps its measured runs took
     steps_expected, _ = planned_steps(table, engine, key, steps, plan)
     workers = eng.workers(case)
+    # the same run on one rank or thread, where this machine's records may say it is no slower
+    one = (_engine_time(case, params, engine, key, steps, plan, table, machine_speed=True, workers=1)[0]
+           if speedup_workers(case, eng) > 1 and not case.engine_options.scheduler else None)
     # every MPI rank is a process with the engine's own overhead; threads share one
     engine_mem = eng.base_bytes * (workers if eng.workers_are_processes else 1) + n * eng.bytes_per_particle
     parse_mem = eng.parse_copies * frames_bytes
@@ -96,7 +99,8 @@ def estimate(case, params: dict, engine: str) -> dict:
             "workers": workers, "workers_field": eng.workers_field,
             "packing_bytes": n * PACKING_BYTES_PER_PARTICLE,
             "memory_bytes": int(max(engine_mem, parse_mem, n * PACKING_BYTES_PER_PARTICLE)),
-            "disk_bytes": int(frames_bytes), "engine_time_s": float(t_engine), "engine_time_basis": basis}
+            "disk_bytes": int(frames_bytes), "engine_time_s": float(t_engine), "engine_time_basis": basis,
+            "engine_time_one_worker_s": one}
 
 
 def describe(size: dict) -> str:
@@ -140,6 +144,15 @@ def problems(case, size: dict) -> list[str]:
                    f"{'ranks' if field == 'mpi_ranks' else 'threads'} would share them, which makes the run slower, "
                    f"not faster (the estimate counts {cores}); set engine_options.{field} to at most {cores}, or "
                    "send the run to a cluster (engine_options.scheduler)")
+    one = size.get("engine_time_one_worker_s")
+    if one is not None and one < size["engine_time_s"]:
+        field = size.get("workers_field", "threads")
+        unit = "rank" if field == "mpi_ranks" else "thread"
+        out.append(f"warning: on one {unit} this run is estimated at ~{fmt_s(one)}, less than the "
+                   f"~{fmt_s(size['engine_time_s'])} on engine_options.{field} = {workers}: this machine's "
+                   f"{size['engine']} runs on {workers} {unit}s and on one (`orchestrator clock show`) predict "
+                   f"no speed-up from the others (docs/engines.md); set engine_options.{field} to 1 to run it "
+                   "faster and leave the other cores free")
     timeout = case.engine_options.timeout
     if size["engine_time_s"] > timeout:
         out.append(f"warning: the estimated engine time {fmt_s(size['engine_time_s'])} exceeds "
@@ -231,17 +244,18 @@ def clock_inputs(case: Case, sc: dict, engine_name: str) -> tuple:
 
 
 def _engine_time(case: Case, params: dict, engine_name: str, key: str, steps: int, plan, table: dict | None,
-                 machine_speed: bool | None) -> tuple[float, str]:
+                 machine_speed: bool | None, workers: int | None = None) -> tuple[float, str]:
     """(engine wall time [s], basis) of a run of ``case`` on ``engine_name`` with its
     :func:`clock_inputs`, from the cost model the project fitted to its own runs
     (:func:`orchestrator.clock.estimate_engine_time`: start-up + steps (a + b n) / S(workers) per
     engine and scene; ``table``: the throughput table, default :func:`orchestrator.clock.load_table`;
     ``machine_speed``: scale a package entry by this machine's measured speed). An engine never
     measured falls back to the adapter's bare throughput (:attr:`engines.base.Engine.throughput`),
-    which underestimates deck runs (the basis says so: :data:`BARE_BASIS`)."""
+    which underestimates deck runs (the basis says so: :data:`BARE_BASIS`). ``workers``: the ranks
+    or threads to estimate for instead of the case's (:func:`speedup_workers`)."""
     eng = get_engine(engine_name)
     n = integrated_particles(params)
-    workers = speedup_workers(case, eng)
+    workers = speedup_workers(case, eng) if workers is None else workers
     t, basis = estimate_engine_time(engine_name, key, max(n, 1), steps, workers,
                                     table=table, plan=plan, machine_speed=machine_speed)
     if t == t:         # not NaN: a measured model

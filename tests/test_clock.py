@@ -12,8 +12,13 @@ import pytest
 
 from orchestrator.clock import (RunSample, Throughput, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
                                 refresh, step_plan)
+from orchestrator.case import load_case
+from orchestrator.derive import derive
 from orchestrator.humanize import fmt_s
-from orchestrator.sizing import SizeError, _basis_note, busy_cores, busy_note, check_fits, describe, estimate
+from orchestrator.sizing import (SizeError, _basis_note, busy_cores, busy_note, check_fits, describe, estimate,
+                                 problems)
+
+CASES = Path(__file__).resolve().parents[1] / "cases"
 
 
 def _runs(a, b, startup, sizes, ranks=1, eff=1.0):
@@ -222,8 +227,6 @@ def test_packings_of_nearly_one_size_count_as_one_size():
 def _triaxial_run(root, name: str, chunks: int | None, steps_run: int | None = None):
     """A complete triaxial_smoke run directory with the case's real derived numbers whose stage 1
     took ``chunks`` chunks (engine time 1 ms per step)."""
-    from orchestrator.case import load_case
-    from orchestrator.derive import derive
     from orchestrator.registry import get_scene
     params = derive(load_case("cases/triaxial_smoke.yaml")).to_dict()
     plan = get_scene("triaxial").step_plan(params["scene"])
@@ -244,8 +247,6 @@ def test_triaxial_estimate_takes_the_chunks_measured_runs_took(tmp_path, monkeyp
     those, not with the budget of every chunk (YADE smoke: 12 of 40 chunks; the budget made the
     estimate 1.9x the engine time, docs/validation.md). A run that skipped the plan (stage 1 out of
     chunks, no drag ramp) does not count."""
-    from orchestrator.case import load_case
-    from orchestrator.derive import derive
     from orchestrator.sizing import estimate
     runs = tmp_path / "runs"
     for name, k in (("a", 11), ("b", 12), ("c", 14)):
@@ -274,8 +275,6 @@ def test_an_estimate_says_the_spread_of_the_steps_its_runs_took(tmp_path, monkey
     cannot hold both: the dry run prints the time at the fewest and at the most units the entry's
     runs took beside the median's; with one run, or runs that agree, it prints none. The same
     range for a steps-only refresh, and a table written before the range existed still reads."""
-    from orchestrator.case import load_case
-    from orchestrator.derive import derive
     runs = tmp_path / "runs"
     for name, k in (("a", 3), ("b", 5), ("c", 12)):
         plan, _ = _triaxial_run(runs, name, k)
@@ -334,9 +333,7 @@ def test_stage_one_is_learned_in_its_own_time_scale_not_in_chunks():
     with the same stage-1 steps (LIGGGHTS, 2 000 grains: 114 000 steps in 15 chunks of 7 600 at
     I = 2.5e-3, 106 400 in 7 of 15 200 at 1.25e-3; counted in chunks the clock put the second at
     1.36x its engine time, docs/validation.md)."""
-    from orchestrator.case import load_case
     from orchestrator.clock import Throughput
-    from orchestrator.derive import derive
     from orchestrator.registry import get_scene
     scene = get_scene("triaxial")
     fast = derive(load_case("cases/triaxial_smoke.yaml")).to_dict()["scene"]
@@ -508,6 +505,32 @@ def test_this_machines_speed_on_several_threads_is_kept_apart_from_its_speed_on_
     assert three == pytest.approx(0.30 * tp.engine_time(n, steps, 3), rel=1e-3) and ASSUMED_WORDS in basis3
 
 
+def test_a_run_on_threads_this_machine_ran_slower_on_is_warned_about(tmp_path, monkeypatch):
+    """YADE's small shear cell ran 366 s on two threads and 315 s on one here (session 38): a case
+    asking for two threads is told one is estimated faster; where two threads measured a speed-up,
+    or no run on two was recorded (the table's assumed speed-up), nothing is said."""
+    from orchestrator.clock import machine_id
+    monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
+    monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))
+    case = load_case(CASES / "shear_cell_small.yaml", overrides={"engine_options": {"threads": 2}})
+    params = derive(case)
+
+    def warnings(records):
+        (tmp_path / "speed.json").write_text(json.dumps({machine_id(): {"yade": [
+            {"run": f"r{k}", "scene": "shear_cell:smooth_sidewall", "n": 1025, "ratio": r, "quiet": True, "ranks": w}
+            for k, (r, w) in enumerate(records)]}}))
+        size = estimate(case, params, "yade")
+        return size, [p for p in problems(case, size) if "on one thread" in p]
+
+    size, said = warnings([(0.30, 1), (0.59, 2)])
+    assert size["engine_time_one_worker_s"] < size["engine_time_s"]
+    assert len(said) == 1 and "set engine_options.threads to 1" in said[0], said
+    assert warnings([(0.30, 1), (0.35, 2)])[1] == []        # two threads measured faster than one
+    assert warnings([(0.30, 1)])[1] == []                   # none measured on two: the table's speed-up
+    one_thread = load_case(CASES / "shear_cell_small.yaml", overrides={"engine_options": {"threads": 1}})
+    assert estimate(one_thread, derive(one_thread), "yade")["engine_time_one_worker_s"] is None
+
+
 def test_a_busy_machine_is_said_and_a_quiet_one_is_not():
     # 2 cores: a one-rank run leaves one core free, so more than 1.5 cores in use shares it
     assert busy_note(1, busy=1.4, cores=2) is None
@@ -525,8 +548,6 @@ def test_more_ranks_than_cores_are_warned_about_and_every_rank_counts_its_memory
     in its estimate and one process's memory: the ranks now count in the memory (each an engine
     process), the speed-up counts at most the cores, and a warning names the field and the fix;
     YADE's threads share one process; a run sent to a cluster counts every rank."""
-    from orchestrator.case import load_case
-    from orchestrator.derive import derive
     from orchestrator.sizing import problems
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     base = load_case("cases/shear_cell_smoke.yaml")
@@ -659,8 +680,6 @@ def test_an_unmeasured_variant_counts_its_steps_from_the_engine_that_ran_it():
     pressure-ramp lengths on LIGGGHTS where spheres take 2.5-4.2 on either engine. YADE without a
     clump run of its own keeps its sphere entry's cost per step but counts the steps LIGGGHTS' clump
     runs took, and says so; once it has its own entry, its own units count."""
-    from orchestrator.case import load_case
-    from orchestrator.derive import derive
     case = load_case("cases/triaxial_smoke.yaml")
     plan = step_plan("triaxial", derive(case)["scene"])
     key = "triaxial:shell_pressure+clumps"
@@ -744,8 +763,6 @@ def test_a_runs_recorded_estimate_is_the_dry_runs_figure(tmp_path, monkeypatch):
     session 30 to 33 it was taken without the factor (YADE's clump triaxial recorded 10.7 h where
     its dry run said 7.5 h, × 0.70 for this machine's speed)."""
     import orchestrator.clock as clock
-    from orchestrator.case import load_case
-    from orchestrator.derive import derive
     from orchestrator.sizing import clock_inputs, estimate, run_estimate
     monkeypatch.setattr(clock, "machine_id", lambda: "a test machine x2")     # no entry was fitted on it
     monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
