@@ -256,7 +256,9 @@ def _status_class(v):
 
 
 def _walltime_fig(wt: dict):
-    parts = {k: v for k, v in wt.items() if k not in ("total", "engine_loop") and isinstance(v, (int, float))}
+    # wall-time phases only: the engine's CPU time and the wall time it spent stopped are in the table
+    parts = {k: v for k, v in wt.items() if k not in ("total", "engine_loop", "engine_cpu", "engine_paused")
+             and isinstance(v, (int, float))}
     if "engine" in parts and isinstance(wt.get("engine_loop"), (int, float)):
         loop = wt["engine_loop"]
         parts["engine (start-up, I/O)"] = max(parts.pop("engine") - loop, 0.0)
@@ -339,7 +341,12 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
         body.append("<details><summary>frames and control values</summary>" + _table(ct) + "</details>")
     wt = summary.get("wall_time") or {}
     if wt:
-        body.append("<h2>Run time</h2>" + _kv({k: (f"{v:.3f} s" if isinstance(v, (int, float)) else v) for k, v in wt.items()}))
+        resumed = summary.get("resumed_from")
+        body.append("<h2>Run time</h2>"
+                    + ("<p class='muted'>the last attempt's (the run was resumed"
+                       + (f" from step {resumed['step']}" if isinstance(resumed, dict) and resumed.get("step") is not None else "")
+                       + "); the whole run's engine time is the results' <i>engine time</i></p>" if resumed else "")
+                    + _kv({k: (f"{v:.3f} s" if isinstance(v, (int, float)) else v) for k, v in wt.items()}))
         body.append(_img(fig_to_data_uri(_walltime_fig(wt)), "wall-time split"))
         if estimate_note(summary):
             body.append(f"<p class='muted'>engine time {_e(estimate_note(summary))}</p>")
