@@ -158,6 +158,7 @@ class TimeStep(Strict):
     fraction: float = Field(0.1, gt=0)
     dt: Time | None = None
     allow_unsafe: bool = False
+    _positive = positive("dt")
 
     # (a fraction above what the case's stability limits allow is refused by orchestrator.derive,
     # with the largest safe fraction of that case)
@@ -182,6 +183,7 @@ class EngineOptions(Strict):
     threads: int = Field(1, ge=1)
     timeout: Time = "3600 s"
     progress: bool = True
+    _positive = positive("timeout")
     scheduler: str | None = Field(
         None, description="Dask scheduler address (tcp://host:8786; dask-jobqueue's SLURMCluster/PBSCluster "
                           "give one): the whole run, with its MPI ranks or threads, goes to one worker of that "
@@ -220,6 +222,7 @@ class CTSegment(Strict):
     sigma: float = Field(1.0, gt=0)
     h: Length | None = None
     shape: bool = True
+    _positive = positive("h")
     degree: int = Field(15, ge=0, le=30)
 
 
@@ -230,6 +233,7 @@ class CTTrack(Strict):
     method: Literal["displacement", "rotation", "invariants"] = "displacement"
     max_disp: Length | None = None
     rings: int = Field(4, ge=1)
+    _positive = positive("max_disp")
 
 
 class CTSeries(Strict):
@@ -238,6 +242,7 @@ class CTSeries(Strict):
     scans: list[str]
     voxel_size: Length | None = None
     segment: CTSegment = Field(default_factory=CTSegment)
+    _positive = positive("voxel_size")
     track: CTTrack = Field(default_factory=CTTrack)
 
     @field_validator("scans")

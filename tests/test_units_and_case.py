@@ -63,6 +63,9 @@ BAD = [
     ("kind: impact", "kind: pendulum", "scene.kind", "'pendulum' is not a scene; set it to one of"),
     ("kind: impact", "kind: impakt", "scene.kind", "did you mean 'impact'? set it to one of impact, plane_shear"),
     ("friction: 0.58}", "friction: 0.58}\nanalysis: [d2minn]", "analysis", "unknown analysis 'd2minn'"),
+    ("friction: 0.58}", "friction: 0.58}\nengine_options: {timeout: -3 min}", "engine_options.timeout",
+     "must be positive"),
+    ("friction: 0.58}", "friction: 0.58}\ntimestep: {dt: -1 ns}", "timestep.dt", "must be positive"),
 ]
 
 
