@@ -247,7 +247,6 @@ def test_triaxial_estimate_takes_the_chunks_measured_runs_took(tmp_path, monkeyp
     those, not with the budget of every chunk (YADE smoke: 12 of 40 chunks; the budget made the
     estimate 1.9x the engine time, docs/validation.md). A run that skipped the plan (stage 1 out of
     chunks, no drag ramp) does not count."""
-    from orchestrator.sizing import estimate
     runs = tmp_path / "runs"
     for name, k in (("a", 11), ("b", 12), ("c", 14)):
         plan, params = _triaxial_run(runs, name, k)
@@ -548,7 +547,6 @@ def test_more_ranks_than_cores_are_warned_about_and_every_rank_counts_its_memory
     in its estimate and one process's memory: the ranks now count in the memory (each an engine
     process), the speed-up counts at most the cores, and a warning names the field and the fix;
     YADE's threads share one process; a run sent to a cluster counts every rank."""
-    from orchestrator.sizing import problems
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     base = load_case("cases/shear_cell_smoke.yaml")
     params = derive(base)
@@ -763,7 +761,7 @@ def test_a_runs_recorded_estimate_is_the_dry_runs_figure(tmp_path, monkeypatch):
     session 30 to 33 it was taken without the factor (YADE's clump triaxial recorded 10.7 h where
     its dry run said 7.5 h, × 0.70 for this machine's speed)."""
     import orchestrator.clock as clock
-    from orchestrator.sizing import clock_inputs, estimate, run_estimate
+    from orchestrator.sizing import clock_inputs, run_estimate
     monkeypatch.setattr(clock, "machine_id", lambda: "a test machine x2")     # no entry was fitted on it
     monkeypatch.setenv("ORCHESTRATOR_MACHINE_SPEED", str(tmp_path / "speed.json"))
     monkeypatch.setenv("ORCHESTRATOR_THROUGHPUT", str(tmp_path / "user.json"))      # no user table

@@ -348,8 +348,9 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
                        + "); the whole run's engine time is the results' <i>engine time</i></p>" if resumed else "")
                     + _kv({k: (f"{v:.3f} s" if isinstance(v, (int, float)) else v) for k, v in wt.items()}))
         body.append(_img(fig_to_data_uri(_walltime_fig(wt)), "wall-time split"))
-        if estimate_note(summary):
-            body.append(f"<p class='muted'>engine time {_e(estimate_note(summary))}</p>")
+        said = estimate_note(summary)
+        if said:
+            body.append(f"<p class='muted'>engine time {_e(said)}</p>")
     if case_text:
         body.append("<h2>Resolved case</h2><details><summary>case.yaml</summary><pre>" + _e(case_text) + "</pre></details>")
     out = Path(out) if out else run_dir / "report.html"
