@@ -34,11 +34,13 @@ from engines.lammps_dump import read_binary_dump
 from engines.liggghts.segments import dump_segments
 from orchestrator.analysis.triaxial import triaxial_curves
 from orchestrator.case import load_case
+from orchestrator.derive import derive
 from orchestrator.frames import Frames
 from orchestrator.grains import frames_for_analysis
 from orchestrator.attempts import read_attempts
 from orchestrator.scenes.triaxial import (SLAB_HULL_D50, _solid_volume, _void_ratios_at, analyse, hull_volume, read_series,
                                           slab_hull_volume, solid_fraction_profile, void_ratios_at_loading)
+from orchestrator.sizing import estimate
 from orchestrator.stability.observables import observables
 
 FLOOR = 1.0          # m/s, issue #14: no grain above 1 m/s in the frame after the drag goes off
@@ -311,19 +313,21 @@ def pace_against_estimate(run: Path, engine: str) -> dict | None:
     for the run's case on ``engine`` (``orchestrator.sizing.estimate``, what ``run --dry-run``
     prints), the CPU time so far, and the total projected from it at the pace of the attempts after
     the first pooled (their resumes' start-ups included) and at the fastest one's (a sample starts
-    loose, with few contacts: the first attempt is left out), with the estimate over each
-    projection. None without a case or attempts."""
+    loose, with few contacts: the first attempt is left out; attempts that made no steps count in
+    the CPU time, not in the pace), with the estimate over each projection. None without a case or
+    an attempt that made steps."""
     rows = attempts_pace(run)
     if not rows or not (run / "case.yaml").exists():
         return None
-    from orchestrator.derive import derive
-    from orchestrator.sizing import estimate
     case = load_case(run / "case.yaml")
     size = estimate(case, derive(case), engine)
     total = int(size["steps_expected"] or size["steps"])
     cpu = sum(r[2] for r in rows)
     last = max(r[1] for r in rows)
-    later = rows[1:] or rows
+    moved = [r for r in rows if r[1] > r[0]]      # an attempt stopped before its first checkpoint made no steps
+    if not moved:
+        return None
+    later = moved[1:] or moved
     pooled = sum(r[1] - r[0] for r in later) / sum(r[2] for r in later)   # start-ups of the resumes included
     paces = [round(pooled, 1), max(r[3] for r in later)]
     proj = [cpu + max(total - last, 0) / p for p in (paces[1], paces[0])]
@@ -333,15 +337,31 @@ def pace_against_estimate(run: Path, engine: str) -> dict | None:
             "projected_h": [round(x / 3600, 1) for x in proj], "estimate_over_projected": [round(est / x, 2) for x in proj]}
 
 
+def _iso_chunks(log: str) -> tuple[list, list]:
+    """The stage-1 chunks of an engine log: (chunk, σ1/p, σ3/p) per chunk, and the chunk-mean
+    volume change each ``ISO creep`` line gives after its chunk (None for "n/a"). A resumed run
+    prints its checkpoint's chunk again: a chunk repeating the one before it is counted once."""
+    chunks, creep, repeat = [], [], False
+    for m in re.finditer(r"^ISO chunk (\d+): sigma1/p = ([\d.eE+-]+) sigma3/p = ([\d.eE+-]+)"
+                         r"|^ISO creep: chunk-mean volume change (\S+)", log, re.M):
+        if m.group(1) is not None:
+            row = (int(m.group(1)), round(float(m.group(2)), 4), round(float(m.group(3)), 4))
+            repeat = bool(chunks) and chunks[-1][0] == row[0]
+            if not repeat:
+                chunks.append(row)
+        elif not repeat:
+            creep.append(None if m.group(4) == "n/a" else float(f"{float(m.group(4)):.3g}"))
+    return chunks, creep
+
+
 def report(run: Path) -> dict:
     run = Path(run)
     log = (run / "engine.log").read_text(errors="replace") if (run / "engine.log").exists() else ""
     out: dict = {"run": str(run)}
-    chunks = re.findall(r"^ISO chunk (\d+): sigma1/p = ([\d.eE+-]+) sigma3/p = ([\d.eE+-]+)", log, re.M)
-    out["iso_chunks"] = [(int(a), round(float(b), 4), round(float(c), 4)) for a, b, c in chunks]
-    creep = re.findall(r"^ISO creep: chunk-mean volume change (\S+)", log, re.M)
+    chunks, creep = _iso_chunks(log)
+    out["iso_chunks"] = chunks
     if creep:        # isotropic.creep_tolerance: the chunk-mean volume change after every tested chunk
-        out["iso_creep_per_chunk"] = [None if x == "n/a" else float(f"{float(x):.3g}") for x in creep]
+        out["iso_creep_per_chunk"] = creep
     out["ramp_start"] = _log_steps(log, r"^ISO converged with drag: drag ramped to zero over \d+ steps from step (\d+)")
     off = _log_steps(log, r"^ISO drag off at step (\d+)")
     if not off and re.search(r"^ISO converged with drag: drag off", log, re.M):
