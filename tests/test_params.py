@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 from pathlib import Path
 
@@ -13,6 +12,7 @@ from orchestrator.case import load_case
 from orchestrator.derive import derive
 from orchestrator.params import FrozenMap, Params, ScenePart, StabilityInputs
 from orchestrator.registry import engine_names, get_engine, get_scene
+from bench_util import load_benchmark
 from tests.conftest import CASES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -101,9 +101,7 @@ def test_low_restitution_is_the_clipped_engines_requirement():
 def test_no_module_outside_engines_names_an_engine():
     """benchmarks/architecture_metrics.py: no module outside engines/ names an engine in code
     (comments, docstrings and messages aside)."""
-    spec = importlib.util.spec_from_file_location("architecture_metrics", REPO / "benchmarks" / "architecture_metrics.py")
-    m = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(m)
+    m = load_benchmark("architecture_metrics")
     named = [f.relative_to(REPO).as_posix() for f in m.py_files(REPO)
              if not f.relative_to(REPO).as_posix().startswith("engines/") and m.ENGINE_NAME.search(m._code_only(f.read_text()))]
     assert named == []

@@ -3,22 +3,20 @@ attempt stopped before its first checkpoint made no steps; its CPU time counts, 
 does not (it divided by zero on the YADE clump run of sessions 37-40)."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 from pathlib import Path
 
 import pytest
 
+from bench_util import load_benchmark
+
 REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def report():
-    spec = importlib.util.spec_from_file_location("triaxial_report", REPO / "benchmarks" / "triaxial_report.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("triaxial_report")
 
 
 def _run(tmp_path: Path, attempts: list[dict]) -> Path:
