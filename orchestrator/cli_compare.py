@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from .console import console
+from .registry import engine_names
 
 
 def _parse_options(items) -> dict:
@@ -155,14 +156,15 @@ def cmd_crossval(args) -> int:
     if args.states:
         opts["states"] = args.states
     cv = crossval(args.case, runs_root=args.runs, out_dir=args.out, concurrent=conc, force=args.force,
-                  measures=args.measure, options=opts)
+                  measures=args.measure, options=opts, engines=args.engine)
     for r in cv.engines:
         con.print(f"[green]{r['engine']}[/green] {'reused' if r['reused'] else 'ran'} {r['run_dir']}: total "
                   f"{(r['wall_time_total_s'] or 0):.1f} s, engine loop {(r['engine_loop_s'] or 0):.1f} s; "
                   f"substitutions: {r['substitutions']}")
     con.print(f"runs: {cv.mode}")
-    _print_table(cv.comparison, con)
-    con.print(f"wrote {cv.comparison.files['table']} and {cv.comparison.files['html']}")
+    for cmp in cv.comparisons.values():
+        _print_table(cmp, con)
+        con.print(f"wrote {cmp.files['table']} and {cmp.files['html']}")
     return 0
 
 
@@ -195,7 +197,8 @@ def add_parsers(sub) -> None:
                    "d2min.cutoff_d50=1.5 (repeatable; value as JSON)")
     c.set_defaults(func=cmd_compare)
 
-    x = sub.add_parser("crossval", help="run a case on both engines (concurrently when 2 cores are free) and compare")
+    x = sub.add_parser("crossval", help="run a case on two or more engines (concurrently when 2 cores are free) and "
+                                        "compare the first with each of the others")
     x.add_argument("case", help="case YAML file")
     x.add_argument("--runs", default="runs", help="runs directory (default ./runs)")
     x.add_argument("--out", help="output directory (default RUNS/<case>/crossval)")
@@ -209,7 +212,8 @@ def add_parsers(sub) -> None:
     x.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="packings per rung and engine (--ladder)")
     x.add_argument("--rung", action="append", choices=["L0", "L1", "L2", "L3", "L4"],
                    help="run only this rung (repeatable; --ladder; default every rung the case has)")
-    x.add_argument("--engine", action="append", help="engine for --ladder (repeatable; default the case's engines)")
+    x.add_argument("--engine", action="append", choices=engine_names(),
+                   help="engine to run (repeatable, the first is the reference A; default the case's engines)")
     x.add_argument("--scheduler", help="Dask scheduler address for --ladder (default: local processes)")
     x.add_argument("--workers", type=int, help="local worker processes for --ladder (default one per core)")
     x.set_defaults(func=cmd_crossval)

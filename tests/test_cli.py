@@ -155,6 +155,14 @@ def test_vtk_export_of_a_run(runs_root, engines_installed):
     assert out.returncode == 0 and (run / "vtk" / "frame_00000.vtu").exists()
 
 
+def test_crossval_of_a_one_engine_case_names_the_fix_before_running(tmp_path):
+    r = main_here("crossval", REPO / "cases" / "shear_cell_default.yaml", "--runs", tmp_path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "shear_cell_default.yaml: `engines` lists ['liggghts']" in r.stderr
+    assert "--engine liggghts --engine yade" in r.stderr
+    assert not any(tmp_path.iterdir())                                  # nothing ran
+
+
 @pytest.mark.engine
 def test_crossval_command_writes_table_report_and_wall_times(runs_root, engines_installed):
     """In the session's runs directory: the engine runs the verification tests made of this case are
@@ -162,11 +170,15 @@ def test_crossval_command_writes_table_report_and_wall_times(runs_root, engines_
     out = cli("crossval", VER / "chung_ooi_1_sphere_sphere_glass.yaml", "--runs", runs_root,
               "--measure", "displacements", "--states", "ends")
     assert out.returncode == 0, out.stderr[-2000:]
-    d = Path(runs_root) / "chung_ooi_1_sphere_sphere_glass" / "crossval"
-    for name in ("comparison.csv", "report.html", "wall_times.csv", "grains.csv"):
-        assert (d / name).stat().st_size > 0, name
+    # the case lists three engines: the first (liggghts) against each of the others, a folder a pair
+    root = Path(runs_root) / "chung_ooi_1_sphere_sphere_glass" / "crossval"
+    assert sorted(p.name for p in root.iterdir()) == ["liggghts_vs_lammps", "liggghts_vs_yade"]
     import pandas as pd
-    wt = pd.read_csv(d / "wall_times.csv")
-    assert {"liggghts", "yade"} <= set(wt.iloc[:, 0].astype(str)) | set(wt.columns)
-    g = pd.read_csv(d / "grains.csv")
-    assert len(g) >= 1
+    for d in root.iterdir():
+        for name in ("comparison.csv", "report.html", "wall_times.csv", "grains.csv"):
+            assert (d / name).stat().st_size > 0, name
+        wt = pd.read_csv(d / "wall_times.csv")
+        assert list(wt.engine) == ["liggghts", "yade", "lammps"]
+        g = pd.read_csv(d / "grains.csv")
+        assert len(g) >= 1
+    assert out.stdout.count("wrote ") == 2

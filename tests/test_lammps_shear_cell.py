@@ -81,10 +81,12 @@ def test_geometry_difference_from_the_stl():
 # the smoke case on LAMMPS
 # ------------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory, engines_installed):
+def smoke(runs_root, engines_installed):
+    """The smoke case on LAMMPS in the session's runs directory: the three-engine crossval of
+    tests/compare reuses it."""
     from orchestrator.runner import run_case
     case = load_case(SMOKE)
-    out = run_case(case, "lammps", runs_root=tmp_path_factory.mktemp("lsc"), progress=False)
+    out = run_case(case, "lammps", runs_root=runs_root, progress=False)
     return case, out
 
 

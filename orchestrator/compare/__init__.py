@@ -4,7 +4,7 @@
 >>> cmp = compare("runs/shear_cell_smoke/liggghts-abc", "ct/frames.h5", out_dir="cmp/")   # doctest: +SKIP
 >>> cmp.table            # one row per measure, quantity and state: metric, distance, A, B
 >>> cmp.grain.tables["states"]   # per-grain trajectory error and displacement agreement
->>> cv = crossval("cases/shear_cell_smoke.yaml", runs_root="runs")                         # doctest: +SKIP
+>>> cv = crossval("cases/shear_cell_smoke.yaml", runs_root="runs", engines=["liggghts", "yade"])   # doctest: +SKIP
 >>> write_run_report("runs/shear_cell_smoke/liggghts-abc")                                 # doctest: +SKIP
 
 See docs/compare.md. Modules: :mod:`.align` (states, coordinates, identity), :mod:`.measures`

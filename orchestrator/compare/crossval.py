@@ -1,11 +1,11 @@
-"""``crossval(case)``: run one case on both engines and compare them.
+"""``crossval(case)``: run one case on two or more engines and compare them.
 
-The two runs go side by side (a thread each driving its engine subprocess,
+The runs go side by side (a thread each driving its engine subprocess,
 :class:`concurrent.futures.ThreadPoolExecutor`) when at least two cores are free, i.e. the number
 of cores minus the 1-minute load average is ≥ 2 (``concurrent="auto"``), otherwise one after the
 other; ``concurrent=True/False`` forces the choice. Each engine's wall time (total and engine loop)
 is recorded; a complete run already on disk is reused (its recorded wall time is reported).
-The comparison puts LIGGGHTS as A and YADE as B.
+The first engine is A, the reference; every other engine is compared with it.
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ import pandas as pd
 from engines.base import EngineError
 
 from ..case import Case, load_case
+from ..registry import engine_names
 from ..runner import RunOutcome, run_case
 from .core import Comparison, compare
 from ..analysis._common import atomic_write_csv
@@ -42,10 +43,15 @@ def free_cores() -> float:
 class CrossValidation:
     case: Case
     runs: dict                    # engine -> RunOutcome
-    comparison: Comparison
+    comparisons: dict             # engine B -> Comparison of A (the first engine) with B
     mode: str                     # "concurrent" or "sequential", with the reason
     seconds: float
     engines: list = field(default_factory=list)   # rows of the wall-time table
+
+    @property
+    def comparison(self) -> Comparison:
+        """The comparison of the first two engines (A with the first B)."""
+        return next(iter(self.comparisons.values()))
 
     @property
     def wall_times(self) -> pd.DataFrame:
@@ -60,18 +66,27 @@ def _run_one(case, engine, runs_root, force):
 
 def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: bool = False,
              measures=None, options: dict | None = None, engines=None, **compare_kw) -> CrossValidation:
-    """Run ``case`` (a Case or a YAML path) on ``engines`` (default: the engines the case lists) and
-    compare them (A = first engine).
+    """Run ``case`` (a Case or a YAML path) on ``engines`` (default: the engines the case lists; any
+    installed engine may be named, as ``orchestrator run --engine`` may) and compare the first
+    engine (A) with each of the others.
 
-    Writes the comparison (CSV, HTML with each engine's wall time) into ``out_dir`` (default
-    ``<runs_root>/<case>/crossval``). Other keyword arguments go to :func:`~orchestrator.compare.compare`.
+    Writes each comparison (CSV, HTML with each engine's wall time) into ``out_dir`` (default
+    ``<runs_root>/<case>/crossval``; with three or more engines, one subdirectory ``A_vs_B`` per
+    pair). Other keyword arguments go to :func:`~orchestrator.compare.compare`. Fewer than two
+    engines is a ValueError, before anything runs.
     """
     if not isinstance(case, Case):
         case = load_case(case)
-    engines = list(case.engines if engines is None else engines)
-    missing = [e for e in engines if e not in case.engines]
-    if missing:
-        raise ValueError(f"case {case.name!r} lists engines {case.engines}; it cannot be cross-validated on {missing}")
+    engines = list(dict.fromkeys(case.engines if engines is None else engines))
+    unknown = [e for e in engines if e not in engine_names()]
+    if unknown:
+        raise ValueError(f"crossval: unknown engine(s) {unknown}; installed engines: {', '.join(engine_names())}")
+    if len(engines) < 2:
+        where = case.source or case.name
+        raise ValueError(
+            f"{where}: `engines` lists {engines or 'no engine'}, and cross-validation needs two; name them "
+            f"with --engine (e.g. `orchestrator crossval {where} --engine liggghts --engine yade`) or list "
+            f"two in the case's `engines`")
     fc = free_cores()
     if concurrent == "auto":
         conc = fc >= 2
@@ -109,15 +124,16 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
                      "substitutions": "; ".join(f"{s['feature']} → {s['mechanism']}"
                                                 for s in o.summary.get("substitutions", [])) or "none"})
     out_dir = Path(out_dir) if out_dir is not None else Path(runs_root) / case.name / "crossval"
-    cmp = compare(runs[engines[0]].run_dir, runs[engines[1]].run_dir, out_dir=None, measures=measures,
-                  options=options, labels=tuple(engines), **compare_kw)
-    cv = CrossValidation(case, runs, cmp, mode, time.perf_counter() - t0, rows)
-    _write(cv, out_dir)
+    a = engines[0]
+    cmps = {b: compare(runs[a].run_dir, runs[b].run_dir, out_dir=None, measures=measures,
+                       options=options, labels=(a, b), **compare_kw) for b in engines[1:]}
+    cv = CrossValidation(case, runs, cmps, mode, time.perf_counter() - t0, rows)
+    for b, cmp in cmps.items():
+        _write(cv, cmp, out_dir if len(cmps) == 1 else out_dir / f"{a}_vs_{b}")
     return cv
 
 
-def _write(cv: CrossValidation, out_dir: Path):
-    cmp = cv.comparison
+def _write(cv: CrossValidation, cmp: Comparison, out_dir: Path):
     cmp.write(out_dir, html=False)
     atomic_write_csv(cv.wall_times, out_dir / "wall_times.csv")
     cmp.files["wall_times"] = out_dir / "wall_times.csv"

@@ -79,6 +79,23 @@ def test_crossval_smoke_produces_every_table_and_plot(crossval_smoke):
     assert "http://" not in html and "https://" not in html
 
 
+def test_crossval_on_three_engines_compares_the_first_with_each(crossval_smoke, runs_root, tmp_path):
+    """Three engines: A (the first named) against each of the others, one directory a pair; the
+    LIGGGHTS and YADE runs are crossval_smoke's, the LAMMPS run tests/test_lammps_shear_cell.py's."""
+    from orchestrator.compare import crossval
+    from tests.compare.conftest import SMOKE
+    cv = crossval(SMOKE, runs_root=runs_root, out_dir=tmp_path, engines=["liggghts", "yade", "lammps"])
+    assert list(cv.comparisons) == ["yade", "lammps"] and cv.comparison is cv.comparisons["yade"]
+    assert list(cv.wall_times.engine) == ["liggghts", "yade", "lammps"]
+    for b, cmp in cv.comparisons.items():
+        out = tmp_path / f"liggghts_vs_{b}"
+        assert cmp.out_dir == out and (out / "comparison.csv").exists() and (out / "report.html").exists()
+        assert (cmp.alignment.a.label, cmp.alignment.b.label) == ("liggghts", b)
+        # one particle table for every engine: grain by grain by id, all 228 grains
+        assert cmp.grain.scalars["identity"] == "ids" and cmp.grain.scalars["grains_identified"] == 228
+        assert cmp.grain.scalars["max_median_error_d50"] > 0          # different engines, chaotic divergence
+
+
 def test_synthetic_ct_compares_back_with_near_zero_grain_error(liggghts_run, ct_frames, tmp_path):
     cmp = compare(liggghts_run, ct_frames, out_dir=tmp_path)
     al = cmp.alignment
