@@ -94,7 +94,7 @@ def smoke(runs_root, engines_installed):
 def test_smoke_protocol_on_lammps(smoke):
     case, out = smoke
     r = check_smoke_protocol(case, out)
-    sc, lp, rot, shear = r["params"]["scene"], r["lp"], r["rot"], r["shear"]
+    sc, lp, shear = r["params"]["scene"], r["lp"], r["shear"]
     # servo: measured -0.6 % at the end of compression (checked above within 2 %), and held during
     # the rotation (mean within 5 %)
     target = sc["servo"]["target_force"]

@@ -125,7 +125,6 @@ def test_synthetic_ct_compares_back_with_near_zero_grain_error(liggghts_run, ct_
 
 def test_identity_falls_back_to_positions_and_rejects_far_grains(liggghts_run, ct_frames):
     from orchestrator.compare import align
-    from orchestrator.frames import Frames
     al = align(liggghts_run, ct_frames, max_distance=1e-9)     # a cut-off below the centroid error
     assert al.identity.n < 0.5 * 228
 
