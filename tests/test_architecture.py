@@ -48,6 +48,7 @@ def test_unknown_engine_is_refused_naming_the_installed_ones():
      {"contact": {"adhesion": {"force": "0.1 uN"}}}),
     ("verification/chung_ooi_1_sphere_sphere_glass.yaml", "contact.rolling", {"contact": {"rolling": {"coefficient": 0.1}}}),
     ("plane_shear_smoke.yaml", "output.contacts", {"output": {"contacts": True}}),
+    ("triaxial_smoke.yaml", "initial_packing", {"initial_packing": {"frames": "scan.h5"}}),   # prepare packs its own
 ])
 def test_silent_physics_is_refused(case, term, override):
     """A term no deck of the scene contains (neither LIGGGHTS' nor YADE's) is refused when the case
