@@ -5,6 +5,8 @@ functions (a test keeps the two in step)."""
 from __future__ import annotations
 
 import json
+import math
+import numbers
 
 from .hints import unknown_name_hint
 
@@ -38,6 +40,19 @@ ANALYSIS_OPTIONS = {
     "stress": ("window", "interval", "at", "control", "d2min_cutoff_d50", "d2min_cutoff", "stages"),
     "triaxial": ("smoothing_rows", "residual_from", "dilatancy_window", "wall"),
 }
+#: options that take one number (SI lengths in m, ``*_d50`` in median diameters; null keeps the
+#: default), each the same kind in every analysis that takes it: the whole numbers among them (counts
+#: of bins, samples, frames, neighbours, rows) and those that must be > 0 (a length, a cutoff, a
+#: count of bins or samples). tests/test_bad_input_cli.py keeps them in step with the defaults of
+#: ``orchestrator.analysis.ANALYSES``.
+_COUNTS = ("bins", "bins_r", "bins_z", "n_radii", "samples", "stride", "min_neighbors", "min_length", "rattler_max",
+           "s_min", "s_min_rg", "smoothing_rows")
+_POSITIVE = ("cutoff", "cutoff_d50", "d2min_cutoff", "d2min_cutoff_d50", "r_max", "r_max_d50", "radius", "dr",
+             "bins", "bins_r", "bins_z", "n_radii", "samples", "stride")
+NUMBER_OPTIONS = frozenset((*_COUNTS, *_POSITIVE, "top_fraction", "tolerance", "wall_distance", "max_angle", "factor",
+                            "limit", "youngs_modulus", "poisson_ratio", "residual_from", "dilatancy_window", "z_ref",
+                            "steady_from", "interval"))
+
 #: analyses that hand the options they do not take themselves to another analysis
 _FORWARDS = {"clusters": "d2min"}
 
@@ -52,7 +67,9 @@ def parse_specs(specs, known=ANALYSIS_NAMES, where: str = "analysis") -> list[tu
     """Normalise a case's ``analysis:`` list: each entry a name or ``{name: {options}}``.
 
     Raises ValueError naming the entry (``where[n]``, e.g. ``analysis[2]``) when a name is unknown,
-    options are not a mapping, or an option is not one the analysis takes (with the nearest name).
+    options are not a mapping, an option is not one the analysis takes (with the nearest name), or a
+    number option's value is not the number it takes (:func:`_number`, which also reads YAML's
+    ``1e-3``, a string, as the number).
     """
     if specs is None:
         return []
@@ -76,8 +93,33 @@ def parse_specs(specs, known=ANALYSIS_NAMES, where: str = "analysis") -> list[tu
             if key not in allowed:
                 raise ValueError(f"{where}[{n}] ({name}): option {key!r}: "
                                  f"{unknown_name_hint(allowed, str(key), 'option')}")
-        out.append((name, dict(opts)))
+        out.append((name, {key: _number(f"{where}[{n}] ({name})", key, v) for key, v in opts.items()}))
     return out
+
+
+def _number(entry: str, key: str, value):
+    """``value`` of option ``key`` as the analysis takes it: unchanged unless ``key`` is one of
+    :data:`NUMBER_OPTIONS`, then a finite number (a numeric string, as YAML reads ``1e-3``, made
+    one), whole for a count and > 0 where it must be; else a ValueError naming ``entry``, the option,
+    the value and what it must be."""
+    if key not in NUMBER_OPTIONS or value is None:
+        return value
+    x = value
+    if isinstance(x, str):
+        try:
+            x = float(x)
+        except ValueError:
+            pass
+    ok = isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x)
+    if ok and key in _COUNTS:
+        ok = float(x).is_integer()
+        x = int(x) if ok else x
+    if ok and key in _POSITIVE:
+        ok = x > 0
+    if not ok:
+        what = ("a whole number" if key in _COUNTS else "a number") + (" > 0" if key in _POSITIVE else "")
+        raise ValueError(f"{entry}: option {key!r} must be {what}, got {value!r}")
+    return x
 
 
 def parse_cli_spec(text: str):

@@ -2,6 +2,8 @@
 carries a final name."""
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import os
 import re
@@ -55,10 +57,20 @@ def remove_stale_temp_files(folder) -> list[Path]:
 
 
 def write_text(path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through ``<name>.partial``. A ``path`` that is a directory is
+    an IsADirectoryError naming it, before anything is written; the temporary file is removed when
+    the write fails."""
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
     tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):      # never created, or not ours (a directory of that name)
+            tmp.unlink()
+        raise
     return path
 
 

@@ -556,7 +556,7 @@ def load_case(path, overrides: dict | None = None, check_timestep: bool = True) 
     try:
         return case_from_dict(data, source=path, check_timestep=check_timestep)
     except CaseError as exc:
-        raise _blame_parents(path, exc) from None
+        raise _blame_parents(path, exc, overrides) from None
 
 
 def _extends_chain(path: Path) -> list[tuple[Path, dict]]:
@@ -576,30 +576,51 @@ def _extends_chain(path: Path) -> list[tuple[Path, dict]]:
     return out
 
 
-def _blame_parents(path: Path, exc: CaseError) -> CaseError:
-    """Report each problem against the file of the ``extends:`` chain that sets the field: an error
-    in a parent case is fixed in the parent, not in the case that extends it."""
+def _depth(node, keys: list[str]) -> int:
+    """How many leading ``keys`` the nested mapping ``node`` sets."""
+    depth = 0
+    for k in keys:
+        if not isinstance(node, dict) or k not in node:
+            break
+        node, depth = node[k], depth + 1
+    return depth
+
+
+def _override_shown(overrides: dict, keys: list[str]) -> str:
+    """``contact.friction=abc``: the override that sets the field ``keys``, as ``--set`` writes it."""
+    node = overrides
+    for k in keys:
+        node = node[k]
+    return f"{'.'.join(keys)}={node}" if not isinstance(node, (dict, list)) else ".".join(keys)
+
+
+def _blame_parents(path: Path, exc: CaseError, overrides: dict | None = None) -> CaseError:
+    """Report each problem against what sets the field: the file of the ``extends:`` chain (an
+    error in a parent case is fixed in the parent, not in the case that extends it), or the
+    ``overrides`` given with the case (``sweep --set``, a ladder's rung: fixed on the command line,
+    not in any file). The message still names the case file."""
     chain = _extends_chain(path)
-    if len(chain) < 2:
+    if len(chain) < 2 and not overrides:
         return exc
     files = []
     problems = []
     for prob in exc.problems:
         field = prob.split(":", 1)[0].strip()
         keys = field.split(".") if field and " " not in field else []
+        if keys and overrides and _depth(overrides, keys) == len(keys):     # applied last: the override's value
+            files.append("overrides")
+            problems.append(f"{prob} [the value comes from the overrides ({_override_shown(overrides, keys)}, "
+                            f"e.g. --set), not from the case file]")
+            continue
         owner, best = None, 0
         for f, d in chain:                       # the nearest file that sets the most of this field's path
-            node, depth = d, 0
-            for k in keys:
-                if not isinstance(node, dict) or k not in node:
-                    break
-                node, depth = node[k], depth + 1
+            depth = _depth(d, keys)
             if depth > best:
                 owner, best = f, depth
         files.append(owner)
         problems.append(prob if owner is None or owner == chain[0][0] else f"{prob} [set in {owner}]")
     owners = set(files)
-    if len(owners) == 1 and None not in owners and files[0] != chain[0][0]:
+    if len(owners) == 1 and None not in owners and "overrides" not in owners and files[0] != chain[0][0]:
         return CaseError(f"{files[0]} (extended by {path})", exc.problems)
     return CaseError(path, problems)
 

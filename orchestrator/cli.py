@@ -22,26 +22,14 @@ def _num(x) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
-def _refusal(case, params, eng_name: str) -> str | None:
-    """Why engine ``eng_name`` cannot run the case as written (a feature it lacks, with no substitute
-    the case accepts: :func:`orchestrator.runner.engine_substitutions`, what the run itself checks
-    before it starts), or None."""
-    from engines.base import UnsupportedFeature
-    from .runner import engine_substitutions
-    try:
-        engine_substitutions(case, eng_name, params)
-    except UnsupportedFeature as exc:
-        return str(exc)
-    return None
-
-
 def cmd_validate(args) -> int:
     from .case import load_case
     from .derive import derive
+    from .runner import refusal
     case = load_case(args.case)
     p = derive(case)
     con = console()
-    refusals = {eng: why for eng in case.engines if (why := _refusal(case, p, eng))}
+    refusals = {eng: why for eng in case.engines if (why := refusal(case, eng, p))}
     verdict = (f"[green]{args.case}: valid[/green]" if not refusals else
                f"[red]{args.case}: not runnable on {', '.join(refusals)} as written[/red]")
     con.print(f"{verdict} — case '{case.name}', scene '{case.scene.kind}', engines {', '.join(case.engines)}")
@@ -66,7 +54,7 @@ def cmd_validate(args) -> int:
 
 def cmd_run(args) -> int:
     from .case import load_case
-    from .runner import run_case
+    from .runner import refusal, run_case
     case = load_case(args.case)
     engines = case.engines if args.engine == "all" else [args.engine]
     con = console()
@@ -75,7 +63,7 @@ def cmd_run(args) -> int:
     from .sizing import busy_cores, busy_note, check_fits, describe, estimate
     params = derive(case)
     from .case import CaseError
-    refusals = [f"engine {eng}: {why}" for eng in engines if (why := _refusal(case, params, eng))]
+    refusals = [f"engine {eng}: {why}" for eng in engines if (why := refusal(case, eng, params))]
     if refusals:                                  # refused before any sizing, packing or run directory
         raise CaseError(case.source or args.case, refusals)
     # a dry run samples the machine's load once; a run, at each engine's start (the one before has just ended)
@@ -245,7 +233,7 @@ def cmd_verify(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    import yaml
+    from .case import yaml_or_case_error
     run_dir = Path(args.run_dir)
     if not run_dir.exists():
         print(f"error: {run_dir}: no such run directory or frames.h5; give a run directory "
@@ -265,14 +253,16 @@ def cmd_analyze(args) -> int:
     # a frames.h5 given for its run: the case, the summary and the outputs are its directory's
     run_root = run_dir.parent if run_dir.is_file() else run_dir
     if not specs:
-        case_file = run_root / "case.yaml"
-        specs = yaml.safe_load(case_file.read_text()).get("analysis", []) if case_file.exists() else []
+        case_file = run_root / "case.yaml"             # a damaged one is a CaseError naming it
+        specs = (yaml_or_case_error(case_file) or {}).get("analysis", []) if case_file.exists() else []
     if not specs:
         print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
     out_dir = Path(args.out) if args.out else run_root / "analysis"
     # an output directory the user may not write is said before the analysis stack is imported (~4 s)
     out_dir.mkdir(parents=True, exist_ok=True)
+    where = "--analysis" if args.analysis else f"{run_root / 'case.yaml'}: analysis"
+    _check_controls(run_dir, parse_specs(specs, where=where), where)
     from .runner import analyze_run
     out, _ = analyze_run(run_root, specs, out_dir if args.out else None, by_name=bool(args.analysis),
                          frames=run_dir)
@@ -284,6 +274,21 @@ def cmd_analyze(args) -> int:
         print(f"error: {label} failed: {v.get('error')} (options {json.dumps(v.get('options') or {})}); "
               f"its traceback is in {out_dir / 'analysis_summary.json'}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _check_controls(frames_path, specs, where: str) -> None:
+    """An analysis's ``control`` option that the frames do not carry, as bad input (a ValueError
+    naming the entry ``where[n]``, the option and the controls there are) before any analysis runs,
+    not as an analysis that failed. ``specs``: :func:`parse_specs`' (name, options) pairs."""
+    from .analysis._common import control_values
+    from .frames import Frames
+    fr = Frames(frames_path)
+    for n, (name, opts) in enumerate(specs):
+        if opts.get("control") is not None:
+            try:
+                control_values(fr, opts["control"])
+            except ValueError as e:
+                raise ValueError(f"{where}[{n}] ({name}): {e}") from None
 
 
 def cmd_vtk(args) -> int:
@@ -339,17 +344,25 @@ def cmd_status(args) -> int:
     def secs(x, complete):
         return "-" if x != x or (x == 0 and complete) else fmt_s(x)
 
+    def known(x):                 # a figure the summary gives: neither missing (None) nor NaN
+        return x is not None and x == x
+
     for label, r in zip((os.path.relpath(d, root) for d in dirs), df.itertuples()):
         done = r.status == "complete"
         st = f"[{colour.get(r.status, 'red')}]{escape(r.status)}[/]"
         # "~": the steps a scene that decides its step count as it runs is expected to take
-        of = f"{'~' if r.steps_expected != r.steps else ''}{int(r.steps_expected):,}" if r.steps_expected == r.steps_expected else ""
-        step = ("-" if r.step != r.step or r.step is None else
-                f"{int(r.step):,}/{of} ({100 * r.done:.0f} %)" if r.done == r.done else f"{int(r.step):,}")
-        t.add_row(escape(label), st, f"{r.n_particles:,}" if r.n_particles == r.n_particles and r.n_particles else "-",
+        of = f"{'~' if r.steps_expected != r.steps else ''}{int(r.steps_expected):,}" if known(r.steps_expected) else "?"
+        step = ("-" if not known(r.step) else
+                f"{int(r.step):,}/{of} ({100 * r.done:.0f} %)" if known(r.done) else f"{int(r.step):,}")
+        t.add_row(escape(label), st, f"{int(r.n_particles):,}" if known(r.n_particles) and r.n_particles else "-",
                   step, str(r.attempts), secs(r.engine_s, done), "-" if r.pace != r.pace else f"{r.pace:.0f}",
                   secs(r.left_pace_s, done), secs(r.left_clock_s, done))
     con.print(t)
+    from .run_summary import read_summary
+    for d in df.run_dir[df.status == "interrupted"]:       # an unreadable summary.json reads as interrupted
+        damage = (read_summary(d) or {}).get("error")
+        if damage:
+            con.print(f"[red]damaged: {escape(damage)}[/red]")
     if (df.status == "interrupted").any():
         con.print("[yellow]an interrupted run resumes from its last restart point when the command that started it "
                   "is run again[/yellow]")
@@ -507,6 +520,9 @@ def error_message(exc: BaseException) -> tuple[str, int]:
                     f"in your home directory) or make the directory writable (chmod u+w)"), 2
         if isinstance(exc, IsADirectoryError):
             return f"{f}: is a directory; give a file", 2
+        if isinstance(exc, FileExistsError) and not os.path.isdir(f):      # mkdir of an output folder
+            return (f"{f}: exists and is not a directory; the output goes into a directory of that name: give "
+                    f"--out (or --runs) an existing directory or a new path"), 2
         if isinstance(exc, NotADirectoryError):
             return f"{f}: a path component is not a directory; check the path", 2
         if isinstance(exc, FileNotFoundError):

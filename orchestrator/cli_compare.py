@@ -9,17 +9,22 @@ import sys
 from pathlib import Path
 
 from .console import console
+from .hints import unknown_name_hint
 from .registry import engine_names
 
 
 def _parse_options(items) -> dict:
-    """``--option measure.key=value`` (value parsed as JSON when possible) and ``--states all``."""
+    """``--option measure.key=value`` (value parsed as JSON when possible) and ``--states all``.
+    Another form, or a measure not in :data:`MEASURES`, is a ValueError naming the option."""
+    from .measure_names import MEASURES
     out: dict = {}
     for it in items or []:
-        if "=" not in it or "." not in it.split("=", 1)[0]:
-            raise SystemExit(f"--option {it!r}: expected MEASURE.KEY=VALUE, e.g. d2min.cutoff_d50=1.5")
-        key, val = it.split("=", 1)
-        m, k = key.split(".", 1)
+        key, eq, val = it.partition("=")
+        m, dot, k = key.partition(".")
+        if not (eq and dot and m and k):
+            raise ValueError(f"--option {it!r}: expected MEASURE.KEY=VALUE, e.g. --option d2min.cutoff_d50=1.5")
+        if m not in MEASURES:
+            raise ValueError(f"--option {it!r}: {unknown_name_hint(MEASURES, m, 'measure')}")
         try:
             v = json.loads(val)
         except ValueError:

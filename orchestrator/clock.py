@@ -61,6 +61,7 @@ import math
 import os
 import platform
 import re
+import sys
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
@@ -251,12 +252,93 @@ def user_table_path() -> Path:
     return base / "orchestrator" / "throughput.json"
 
 
+#: (file, mtime, size) of the damaged tables already warned of in this process (an estimate reads
+#: the tables again for every run of a sweep: one warning a file is enough)
+_WARNED: set = set()
+
+
+def _warn_damaged(path: Path, why: str, fix: str) -> None:
+    """One line on stderr, once per file and version: ``path`` cannot be used (``why``), what was
+    done instead and the ``fix``: a damaged table was ignored without a word (``clock show`` listed
+    the package table as if the user's were not there)."""
+    try:
+        st = path.stat()
+        key = (str(path), st.st_mtime_ns, st.st_size)
+    except OSError:
+        key = (str(path), None, None)
+    if key in _WARNED:
+        return
+    _WARNED.add(key)
+    print(f"warning: {path}: {why}; {fix}", file=sys.stderr)
+
+
+class TableError(ValueError):
+    """A table file that is not a table: ``why`` says what is wrong, the message names the file and the fix."""
+
+    def __init__(self, path, why: str):
+        self.path, self.why = Path(path), why
+        super().__init__(f"{path}: {why}; delete it or move it aside")
+
+
+def read_table(path: Path) -> dict:
+    """A throughput or speed table as stored (a JSON mapping; {} when there is none), or a
+    :class:`TableError` (a ValueError) naming the file, what is wrong and the fix."""
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    text = path.read_text()
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise TableError(path, f"not a JSON table ({exc})") from None
+    if not isinstance(data, dict):
+        raise TableError(path, f"a JSON {type(data).__name__}, not a table (a JSON mapping)")
+    return data
+
+
+#: what to do about a damaged user table (the estimates meanwhile use the package table alone)
+_USER_TABLE_FIX = ("the estimates use the package table instead. Fix: delete the file (or move it aside) and refit "
+                   "it from your complete runs with `orchestrator clock refresh RUNS`")
+
+
+def _usable_entry(d) -> bool:
+    """Whether a table entry gives a time (its numbers are numbers)."""
+    try:
+        return math.isfinite(Throughput.from_dict(d).engine_time(1000, 1000, 2))
+    except (TypeError, ValueError, AttributeError, KeyError, OverflowError, ZeroDivisionError):
+        return False
+
+
 def _user_table() -> dict:
+    """The user table as stored, the entries it cannot use left out with a warning (a damaged file:
+    all of it, with a warning naming it and the fix)."""
     user = user_table_path()
     try:
-        return json.loads(user.read_text()) if user.is_file() else {}
-    except (OSError, ValueError):   # another user's table (HOME kept under sudo/su): not ours to read
+        if not user.is_file():
+            return {}
+        data = read_table(user)
+    except OSError:                 # another user's table (HOME kept under sudo/su): not ours to read
         return {}
+    except TableError as exc:
+        _warn_damaged(user, f"the user throughput table cannot be read: {exc.why}", _USER_TABLE_FIX)
+        return {}
+    out, bad = {}, []
+    for eng, scenes in data.items():
+        if eng.startswith("_"):
+            continue
+        if not isinstance(scenes, dict):
+            bad.append(f"{eng}: not a mapping of scenes")
+            continue
+        for sc, d in scenes.items():
+            if not sc.startswith("_") and not _usable_entry(d):
+                bad.append(f"{eng} {sc}: not a throughput entry")
+                continue
+            out.setdefault(eng, {})[sc] = d
+    if bad:
+        _warn_damaged(user, f"the user throughput table has entries it cannot use ({'; '.join(bad)}): left out",
+                      _USER_TABLE_FIX.replace("the estimates use the package table instead",
+                                              "their estimates use the package table"))
+    return out
 
 
 def _as_throughputs(table: dict) -> dict:
@@ -308,11 +390,26 @@ def speed_table_path() -> Path:
 
 
 def _speed_table() -> dict:
+    """The machines' speed records as stored; a damaged file is ignored with a warning naming it
+    (the next record a complete run makes rewrites it)."""
+    p = speed_table_path()
     try:
-        p = speed_table_path()
-        return json.loads(p.read_text()) if p.is_file() else {}
-    except (OSError, ValueError):
+        data = read_table(p)
+    except OSError:
         return {}
+    except TableError as exc:
+        _warn_damaged(p, f"the machine-speed record cannot be read: {exc.why}",
+                      "the estimates take this machine as the package table's speed. Fix: delete the file (or move "
+                      "it aside); the next complete run records this machine's speed afresh")
+        return {}
+    ok = {m: engs for m, engs in data.items() if isinstance(engs, dict)
+          and all(isinstance(rows, list) and all(isinstance(r, dict) for r in rows) for rows in engs.values())}
+    if len(ok) < len(data):
+        _warn_damaged(p, f"the machine-speed record has machine entries it cannot use "
+                         f"({', '.join(m for m in data if m not in ok)}): left out",
+                      "Fix: delete the file (or move it aside); the next complete run records this machine's "
+                      "speed afresh")
+    return ok
 
 
 def speed_records() -> list[dict]:
@@ -981,7 +1078,7 @@ def refresh(paths, out: Path | None = None, steps_only: bool = False, add: bool 
     for s in samples_from_runs(paths):
         groups.setdefault((s.engine, s.scene), []).append(s)
     out = Path(out) if out else user_table_path()
-    old = json.loads(out.read_text()) if out.is_file() else {}
+    old = read_table(out)           # a damaged table: a ValueError naming it, nothing written
     fitted: dict = {}
     entries: dict = {}          # (engine, scene) -> the table entry to write, the runs it keeps included
     for (eng, sc), smp in sorted(groups.items()):

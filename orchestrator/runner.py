@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from engines.base import EngineError
+from engines.base import EngineError, UnsupportedFeature
 from engines.render import templates_hash
 
 from .atomic import remove_stale_temp_files, write_json, write_text
@@ -117,6 +117,17 @@ def engine_substitutions(case: Case, engine_name: str, params) -> list:
     accepts. What a run checks before it starts, and ``validate`` / ``run --dry-run`` with it."""
     eng = get_engine(engine_name)
     return eng.check(eng.required_features(case, params), case.contact.substitutes)
+
+
+def refusal(case: Case, engine_name: str, params) -> str | None:
+    """Why ``engine_name`` cannot run the case as written (a feature it lacks with no substitute the
+    case accepts: :func:`engine_substitutions`), or None. ``validate``, ``run`` and ``crossval``
+    ask it for every engine before the first run starts."""
+    try:
+        engine_substitutions(case, engine_name, params)
+    except UnsupportedFeature as exc:
+        return str(exc)
+    return None
 
 
 def prepare(case: Case, engine_name: str, run_dir: Path, params: Params | None = None) -> tuple[Params, list]:

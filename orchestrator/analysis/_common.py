@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -83,12 +82,14 @@ def d50(radius: np.ndarray, weighting: str = "number") -> float:
 
 def control_values(frames, control: str | None = None) -> tuple[str, np.ndarray]:
     """The per-frame control series used to label states: ``control`` if given, else the first
-    of axial_strain, angle, shear_strain present in the frames, else time."""
+    of axial_strain, angle, shear_strain present in the frames, else time. A ``control`` the frames
+    do not carry is a ValueError naming the ones they do."""
     if control is not None:
         if control == "time":
             return "time", np.asarray(frames.time, float)
         if control not in frames.controls:
-            raise KeyError(f"{frames.path}: no control {control!r}; controls: {sorted(frames.controls)} (or 'time')")
+            raise ValueError(f"control {control!r}: {frames.path} has no such control; give one of "
+                             f"{sorted(frames.controls)} or 'time'")
         return control, np.asarray(frames.controls[control], float)
     for c in ("axial_strain", "angle", "shear_strain"):
         if c in frames.controls and np.isfinite(frames.controls[c]).any():

@@ -87,11 +87,13 @@ def open_source(x, label: str | None = None) -> Source:
 
 def choose_control(a: Frames, b: Frames, control: str | None = None) -> str:
     """The control both sets carry (finite somewhere in each), first of :data:`CONTROL_ORDER`,
-    else ``time``."""
+    else ``time``. A ``control`` given that either set lacks is a ValueError naming the controls
+    it has."""
     if control is not None:
         for fr in (a, b):
             if control != "time" and control not in fr.controls:
-                raise KeyError(f"{fr.path}: no control {control!r}; it has {sorted(fr.controls)} (or 'time')")
+                raise ValueError(f"--control {control!r}: {fr.path} has no such control; give one of "
+                                 f"{sorted(fr.controls)} or 'time', or leave --control out to choose one")
         return control
     for c in CONTROL_ORDER:
         if all(c in fr.controls and np.isfinite(fr.controls[c]).any() for fr in (a, b)):

@@ -19,9 +19,10 @@ import pandas as pd
 
 from engines.base import EngineError
 
-from ..case import Case, load_case
+from ..case import Case, CaseError, load_case
+from ..derive import derive
 from ..registry import engine_names
-from ..runner import RunOutcome, run_case
+from ..runner import RunOutcome, refusal, run_case
 from .core import Comparison, compare
 from ..analysis._common import atomic_write_csv
 from .report import write_compare_report
@@ -73,7 +74,8 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
     Writes each comparison (CSV, HTML with each engine's wall time) into ``out_dir`` (default
     ``<runs_root>/<case>/crossval``; with three or more engines, one subdirectory ``A_vs_B`` per
     pair). Other keyword arguments go to :func:`~orchestrator.compare.compare`. Fewer than two
-    engines is a ValueError, before anything runs.
+    engines is a ValueError, and an engine that cannot run the case as written a CaseError naming
+    the case file (:func:`_refuse`), both before anything runs.
     """
     if not isinstance(case, Case):
         case = load_case(case)
@@ -87,6 +89,7 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
             f"{where}: `engines` lists {engines or 'no engine'}, and cross-validation needs two; name them "
             f"with --engine (e.g. `orchestrator crossval {where} --engine liggghts --engine yade`) or list "
             f"two in the case's `engines`")
+    _refuse(case, engines)
     fc = free_cores()
     if concurrent == "auto":
         conc = fc >= 2
@@ -131,6 +134,24 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
     for b, cmp in cmps.items():
         _write(cv, cmp, out_dir if len(cmps) == 1 else out_dir / f"{a}_vs_{b}")
     return cv
+
+
+def _refuse(case: Case, engines: list) -> None:
+    """Raise CaseError naming the case file when any of ``engines`` lacks a term the case asks for
+    with no substitute it accepts (:func:`orchestrator.runner.refusal`, what each run
+    checks before it starts, and ``orchestrator run`` for every engine before the first): a
+    cross-validation compares only once every engine has run, so one refused after the others have
+    run for hours would waste them."""
+    params = derive(case)
+    refused = {e: why for e in engines if (why := refusal(case, e, params))}
+    if refused:
+        able = [e for e in engines if e not in refused]
+        drop = (f"cross-validate on {' and '.join(able)} (`--engine {' --engine '.join(able)}`)" if len(able) >= 2
+                else "name two engines that can run it with --engine")
+        problems = [f"engine {e}: {why}" for e, why in refused.items()]
+        problems[-1] += (f". Nothing was run (crossval): accept a substitute in contact.substitutes where one is "
+                         f"offered, or {drop}")
+        raise CaseError(case.source or case.name, problems)
 
 
 def _write(cv: CrossValidation, cmp: Comparison, out_dir: Path):

@@ -10,12 +10,13 @@ import datetime as _dt
 import html
 import io
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..atomic import write_text
+from ..case import yaml_or_case_error
 from ..clock import run_step_plan
 from ..results import estimate_note, key_results
 from ..analysis.plots import _fig
@@ -114,12 +115,10 @@ def _page(title: str, body: list[str]) -> str:
 
 
 def _write(path, text: str) -> Path:
+    """Write the page (UTF-8) atomically, its folder made if missing (:func:`orchestrator.atomic.write_text`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_text(path, text)
 
 
 def _subs_html(subs: list) -> str:
@@ -280,15 +279,16 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
     ``analysis:`` list if any result is missing, else the results already there; when the case lists
     none, :data:`DEFAULT_ANALYSES` of the scene. ``rerun`` recomputes them.
     """
-    import yaml
     run_dir = Path(run_dir)
     if run_dir.name == "frames.h5":
         run_dir = run_dir.parent
     fr = Frames(run_dir)
     summ_path = run_dir / "summary.json"
     summary = json.loads(summ_path.read_text()) if summ_path.exists() else {}
-    case_text = (run_dir / "case.yaml").read_text() if (run_dir / "case.yaml").exists() else None
-    case = yaml.safe_load(case_text) if case_text else (fr.meta.get("case") if isinstance(fr.meta.get("case"), dict) else {})
+    case_file = run_dir / "case.yaml"
+    case_text = case_file.read_text() if case_file.exists() else None
+    # a damaged case.yaml is a CaseError naming it (not a YAML parser's traceback)
+    case = yaml_or_case_error(case_file) if case_text else (fr.meta.get("case") if isinstance(fr.meta.get("case"), dict) else {})
     kind = ((case or {}).get("scene") or {}).get("kind", "")
     adir = run_dir / "analysis"
     asum_path = adir / "analysis_summary.json"

@@ -43,7 +43,8 @@ def ct_run_dir(case, runs_root="runs") -> Path:
 def run_ct_case(case, runs_root="runs", force: bool = False) -> Path:
     """Segment and track the case's scan series; return the frames.h5 path (reused if complete)."""
     if case.ct is None:
-        raise CTCaseError(f"{case.source}: the case has no ct: section (scans to segment and track)")
+        raise CTCaseError(f"{case.source}: the case has no ct: section (scans to segment and track); add one "
+                          "with the scans, e.g. `ct: {scans: [\"scans/scan_*.tif\"], voxel_size: 2.2 um}` (docs/ct.md)")
     run_dir = ct_run_dir(case, runs_root)
     frames = run_dir / "frames.h5"
     if frames.exists() and not force:

@@ -21,21 +21,34 @@ from .io import Scan, ScanError, check_series, read_scan, write_scan
 __all__ = ["synth_main", "segment_main", "track_main", "shapes_main"]
 
 
-def _length(s):
+def _length(s, option):
+    """A length option ("2.2 um") in metres, or None; a ValueError naming ``option`` (exit 2) unless it
+    is a positive length."""
     if s is None:
         return None
-    return to_si(s, "length")
+    try:
+        v = to_si(s, "length")
+    except ValueError as e:
+        raise ValueError(f"{option}: {e}") from None
+    if not 0 < v < np.inf:
+        raise ValueError(f"{option}: {s!r} is not a positive length; write e.g. '30 um'")
+    return v
 
 
 def synth_main(args) -> int:
     con = console(stderr=True)
-    vs = _length(args.voxel_size)
+    vs = _length(args.voxel_size, "--voxel-size")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     kw = dict(psf_sigma=args.psf, noise=args.noise, drift=args.drift)
     if args.frames:
         fr = Frames(args.frames)
+        n = fr.n_frames
+        bad = [k for k in args.frame or [] if not -n <= k < n]
+        if bad:
+            con.print(f"[red]error:[/red] --frame {bad[0]}: {args.frames} holds {n} frames; give an index in "
+                      f"0..{n - 1} (or -{n}..-1 counting from the end)")
+            return 2
         hollow = np.where(rng.random(fr.n_particles) < args.hollow, 0.5, 0.0)
         scans, ids = synth.scans_from_frames(fr, vs, frame_indices=args.frame, hollow=hollow, seed=args.seed, **kw)
         idx = list(range(fr.n_frames)) if args.frame is None else args.frame
@@ -54,8 +67,9 @@ def synth_main(args) -> int:
         scans = synth.render_sequence((H + 3, n_vox, n_vox), vs, pos, r, times=times, progress=True,
                                       hollow=hollow, seed=args.seed, **kw)
     else:
-        con.print("[red]ct synth: give --frames FILE or --demo shear[/red]")
+        con.print("[red]error:[/red] ct synth: give --frames FILE (a frames.h5 or run directory) or --demo shear")
         return 2
+    out.mkdir(parents=True, exist_ok=True)
     for k, s in enumerate(scans):
         write_scan(s, out / f"scan_{k:03d}.tif")
     write_frames(out / "truth.h5", ids, radius, times, pos, meta={"source": "ct-synthetic-truth", "voxel_size": vs})
@@ -67,7 +81,7 @@ def _scan_options(args) -> dict:
     """read_scan's keywords from the command line: voxel size, and shape and dtype of a raw volume."""
     kw = {}
     if args.voxel_size:
-        kw["voxel_size"] = _length(args.voxel_size)
+        kw["voxel_size"] = _length(args.voxel_size, "--voxel-size")
     if args.shape:
         kw["shape"], kw["dtype"] = tuple(args.shape), args.dtype
     return kw
@@ -76,20 +90,20 @@ def _scan_options(args) -> dict:
 def segment_main(args) -> int:
     con = console(stderr=True)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    kw = _scan_options(args)
+    kw, h = _scan_options(args), _length(args.h, "--h")
     try:
         scans = [read_scan(p, **kw) for p in args.scans]
         check_series(scans)
     except ScanError as e:
         con.print(f"[red]error:[/red] {e}")
         return 2
+    out.mkdir(parents=True, exist_ok=True)
     summary = []
     with Progress(console=con) as prog:
         task = prog.add_task("segmenting scans", total=len(scans))
         for p, sc in zip(args.scans, scans):
             stem = Path(p).stem if not Path(p).is_dir() else Path(p).name
-            seg = segment.segment(sc, sigma=args.sigma, h=_length(args.h))
+            seg = segment.segment(sc, sigma=args.sigma, h=h)
             g = seg.grains
             if not args.no_shape:
                 tab, _ = shape.grain_shapes(seg, degree=args.degree)
@@ -116,7 +130,18 @@ def track_main(args) -> int:
     if not meta_path.exists():
         con.print(f"[red]error:[/red] {meta_path}: not found; run `orchestrator ct segment` first")
         return 2
-    info = json.loads(meta_path.read_text())
+    max_disp = _length(args.max_disp, "--max-disp")
+    vs = _length(args.voxel_size, "--voxel-size")
+    try:
+        info = json.loads(meta_path.read_text())
+    except ValueError as e:
+        info = f"not JSON ({e})"
+    scans_ok = isinstance(info, list) and all(isinstance(s, dict) and {"scan", "voxel_size"} <= s.keys() for s in info)
+    if not (scans_ok and info):
+        what = info if isinstance(info, str) else "empty" if info == [] else "not a list of scans"
+        con.print(f"[red]error:[/red] {meta_path}: {what}; run `orchestrator ct segment SCANS --out {segdir}` "
+                  "first (it writes segment.json with one entry a scan)")
+        return 2
     tables = []
     for s in info:
         p = Path(s["scan"])
@@ -125,14 +150,14 @@ def track_main(args) -> int:
     scans = None
     if args.method == "rotation":
         paths = args.scans or [s["scan"] for s in info]
-        kw = {"voxel_size": _length(args.voxel_size)} if args.voxel_size else {}
+        kw = {"voxel_size": vs} if vs else {}
         try:
             scans = [read_scan(p, **kw) for p in paths]
             check_series(scans)
         except ScanError as e:
             con.print(f"[red]error:[/red] {e}")
             return 2
-    links = track.track_sequence(tables, args.method, max_disp=_length(args.max_disp), scans=scans,
+    links = track.track_sequence(tables, args.method, max_disp=max_disp, scans=scans,
                                  rotation_kw={"n_rings": args.rings}, progress=True)
     contacts = []
     for s in info:
@@ -165,7 +190,7 @@ def shapes_main(args) -> int:
         con.print(f"[red]error:[/red] --spheres {args.spheres} --coverage {args.coverage}: give at least 1 sphere "
                   "and a coverage in (0, 1], e.g. --spheres 6 --coverage 0.97")
         return 2
-    kw = _scan_options(args)
+    kw, h = _scan_options(args), _length(args.h, "--h")
     try:
         sc = read_scan(args.input, **kw)
     except ScanError as e:
@@ -189,7 +214,7 @@ def shapes_main(args) -> int:
         meta["grain_table"] = str(table)
     else:
         try:
-            seg = segment.segment(sc, sigma=args.sigma, h=_length(args.h), progress=True)
+            seg = segment.segment(sc, sigma=args.sigma, h=h, progress=True)
         except segment.SegmentationError as e:
             con.print(f"[red]error:[/red] {e}")
             return 2

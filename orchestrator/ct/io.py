@@ -208,6 +208,11 @@ def read_scan(path, voxel_size: float | None = None, origin=None, shape=None, dt
             if shape is None or dtype is None:
                 raise ScanError(f"{p}: a raw volume needs shape=(nz, ny, nx) and dtype (e.g. uint16); "
                                 f"got shape={shape}, dtype={dtype}")
+            try:
+                np.dtype(dtype)
+            except (TypeError, ValueError):
+                raise ScanError(f"{p}: dtype {dtype!r} is not a data type; give e.g. uint8, uint16 or "
+                                "float32") from None
             dt = np.dtype(dtype).newbyteorder(byte_order) if np.dtype(dtype).itemsize > 1 else np.dtype(dtype)
             n = int(np.prod(shape))
             size = p.stat().st_size

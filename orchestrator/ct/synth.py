@@ -18,6 +18,7 @@ coefficients (see :mod:`orchestrator.ct.shape`), optionally hollow.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -429,10 +430,10 @@ def scans_from_frames(frames, voxel_size, margin=None, frame_indices=None, progr
     margin = 2 * rmax if margin is None else margin
     lo = np.nanmin(pos.reshape(-1, 3), axis=0) - margin
     hi = np.nanmax(pos.reshape(-1, 3), axis=0) + margin
-    shape = tuple(np.ceil((hi - lo) / voxel_size).astype(int)[::-1] + 1)
-    if np.prod(shape) > 1024 ** 3:
+    shape = tuple(int(n) + 1 for n in np.ceil((hi - lo) / voxel_size)[::-1])
+    if math.prod(shape) > 1024 ** 3:
         raise ValueError(f"{fr.path}: at voxel size {voxel_size:.3g} m the scan would have shape {shape} "
-                         "(over 1024^3 voxels); choose a larger voxel size")
+                         "(over 1024^3 voxels); choose a larger voxel size (ct synth --voxel-size)")
     controls = {k: v[idx] for k, v in fr.controls.items()}
     scans = render_sequence(shape, voxel_size, pos, fr.radius, origin=lo, times=fr.time[idx],
                             controls=controls, progress=progress, **kw)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 from engines.base import EngineError
 
@@ -21,6 +22,9 @@ from ..case import load_case
 from ..clock import engine_seconds
 from ..derive import derive
 from ..runner import run_case
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: shortening of a plane-shear probe: compression, a short settling and a little shear
 PROBE = {"plane_shear": {"scene": {"shear_strain": 0.1, "settle_time_constants": 3, "shear_frames": 1,
@@ -78,13 +82,35 @@ def probe(case_path, engine: str, fraction: float, runs_root, overrides: dict | 
             "engine_time": engine_seconds(summ)}
 
 
-def bisect(case_path, engine: str, runs_root="runs", rel_tol: float = 0.15, max_fraction: float = 64.0,
-           probe_overrides: dict | None = None, log=None) -> Bisection:
-    """Largest stable dt fraction of ``case_path`` on ``engine`` (see the module docstring)."""
+def check_tolerance(rel_tol) -> float:
+    """The relative bisection tolerance (``--tol``), or a ValueError: it must lie strictly between 0
+    and 1 (at 0 or below the bisection would never end; at 1 or above it would stop at once)."""
+    try:
+        tol = float(rel_tol)
+    except (TypeError, ValueError):
+        tol = math.nan
+    if not 0 < tol < 1:
+        shown = rel_tol if math.isnan(tol) else format(tol, "g")
+        raise ValueError(f"--tol {shown}: the relative bisection tolerance must lie between 0 and 1 (exclusive); "
+                         f"give e.g. --tol 0.15 (the default)")
+    return tol
+
+
+def probe_case(case_path, probe_overrides: dict | None = None):
+    """(overrides, case) of the probes of ``case_path``: the case shortened by :data:`PROBE` and
+    :data:`MEMBER_PROBE` (or by ``probe_overrides``), loaded and checked, as no probe has run yet."""
     base = load_case(case_path)
     ov = probe_overrides if probe_overrides is not None else _merge(PROBE.get(base.scene.kind, {}),
                                                                     MEMBER_PROBE.get(base.name, {}))
-    case = load_case(case_path, overrides=ov or None)
+    return ov, load_case(case_path, overrides=ov or None)
+
+
+def bisect(case_path, engine: str, runs_root="runs", rel_tol: float = 0.15, max_fraction: float = 64.0,
+           probe_overrides: dict | None = None, log=None) -> Bisection:
+    """Largest stable dt fraction of ``case_path`` on ``engine`` (see the module docstring).
+    ``rel_tol`` must lie in (0, 1) (:func:`check_tolerance`), checked before any probe."""
+    rel_tol = check_tolerance(rel_tol)
+    ov, case = probe_case(case_path, probe_overrides)
     p = derive(case)
     rep = p["stability"]
     f_check = rep["dt_max_safe"] / p["dt_critical"]

@@ -69,10 +69,38 @@ def invert_uncertainty(target: float, fit: dict, n: int = 2000, seed: int = 0) -
     return float(np.std(out)) if len(out) > n // 2 else float("nan")
 
 
+#: the scene the calibration is defined on (seed 000 §3.2): μ_macro = |F_x|/|F_z| at fixed normal stress
+SCENE = "plane_shear"
+
+
+def check_calibration(case_path, mus, target: float | None = None) -> None:
+    """Refuse, before any run, what :func:`calibrate` cannot use: a case that is not plane shear
+    (:class:`CaseError` naming the case file and its scene) or friction coefficients that are not
+    finite numbers of at least 0, or fewer than the 3 distinct ones the saturating fit needs
+    (ValueError naming ``--mu``), a ``target`` that is not a finite number (naming ``--target``)."""
+    from ..case import CaseError, load_case
+    case = load_case(case_path)
+    if case.scene.kind != SCENE:
+        raise CaseError(case_path, [f"scene.kind: the case is a {case.scene.kind} scene; calibration needs a "
+                                    f"{SCENE} case (seed 000 §3.2: mu_macro at a fixed normal stress): give one, "
+                                    f"e.g. cases/plane_shear_smoke.yaml or cases/plane_shear_seed.yaml"])
+    bad = [m for m in mus if isinstance(m, bool) or not isinstance(m, (int, float)) or not math.isfinite(m) or m < 0]
+    if bad:
+        raise ValueError(f"--mu: {', '.join(map(str, bad))}: a friction coefficient is a finite number of at least 0; "
+                         "give them comma-separated, e.g. --mu 0,0.2,0.4,0.6,1.0")
+    if len(set(float(m) for m in mus)) < 3:
+        raise ValueError(f"--mu {','.join(map(str, mus))}: {len(set(float(m) for m in mus))} distinct friction "
+                         "coefficient(s); the saturating fit needs at least 3: give more, e.g. --mu 0,0.2,0.4,0.6,1.0")
+    if target is not None and not math.isfinite(target):
+        raise ValueError(f"--target {target}: the target mu_macro is a finite number, e.g. --target 0.3")
+
+
 def calibrate(case_path, mus: list[float], target: float | None = None, engines: list[str] | None = None,
               runs_root="runs", scheduler=None, workers: int | None = None, plot: str | Path | None = None) -> dict:
     """Sweep contact.friction over ``mus`` (through :func:`orchestrator.stability.sweep.sweep`),
-    fit per engine, invert for ``target``. Returns {"table", "fits", "mu_for_target", "plot"}."""
+    fit per engine, invert for ``target``. Returns {"table", "fits", "mu_for_target", "plot"}.
+    The case and ``mus`` are checked first (:func:`check_calibration`): nothing runs on bad input."""
+    check_calibration(case_path, mus, target)
     df = sweep(case_path, {"contact.friction": [float(m) for m in mus]}, engines=engines, runs_root=runs_root,
                scheduler=scheduler, workers=workers)
     fits, inv = {}, {}

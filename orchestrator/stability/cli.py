@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import glob
 import os
+import sys
 from pathlib import Path
 
 from ..console import console
@@ -32,18 +33,47 @@ def _suite(which: str) -> list[str]:
     return files
 
 
+def _check_out_file(path, option: str) -> None:
+    """Refuse, before any run, an output file (``--csv``) that could not be written at the end:
+    its folder missing or not a folder, or the path a folder (ValueError naming the option)."""
+    if path is None:
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"{option} {path}: is a directory; give a file name, e.g. {option} {p / 'table.csv'}")
+    if not p.parent.is_dir():
+        raise ValueError(f"{option} {path}: the folder {p.parent} does not exist; create it (mkdir -p {p.parent}) "
+                         f"or give a file in an existing folder")
+
+
+def _check_workers(args) -> None:
+    """``--workers`` is a count of local worker processes (0: one per core, as when it is left out);
+    a negative one is refused before any worker starts."""
+    w = getattr(args, "workers", None)
+    if w is not None and w < 0:
+        raise ValueError(f"--workers {w}: give a number of worker processes, e.g. --workers 2 (0: one per core)")
+
+
 def cmd_stability(args) -> int:
-    from .bisection import bisect, table
+    from .bisection import bisect, check_tolerance, probe_case, table
     from ..case import load_case
     from ..derive import derive
     cases = list(args.case) + (_suite(args.suite) if args.suite else [])
     if not cases:
-        print("give a CASE or --suite ci|all")
+        print("error: give a CASE or --suite ci|all", file=sys.stderr)
         return 2
-    con = console()
-    results = []
+    check_tolerance(args.tol)
+    _check_out_file(args.csv, "--csv")
+    # every case (and its shortened probe) is read and checked before the first bisection runs: a
+    # bad second case found after the first case's hour of probes is the first case's hour lost
+    loaded = []
     for c in cases:
         case = load_case(c)
+        probe_case(c)
+        loaded.append((c, case))
+    con = console()
+    results = []
+    for c, case in loaded:
         rep = derive(case)["stability"]
         con.print(f"[bold]{case.name}[/bold]: dt = {rep['dt']:.3e} s; limits: "
                   + ", ".join(f"{k} {v:.3e} s ({rep['fractions'][k]:.3g})" for k, v in rep["limits"].items()))
@@ -75,10 +105,13 @@ def _say_run_ended(con):
 
 def cmd_convergence(args) -> int:
     from .convergence import ladder, ladder_plan
+    _check_workers(args)
+    _check_out_file(args.csv, "--csv")
     if args.dry_run:
         return _print_plan(ladder_plan(args.case, args.knob, [_val(v) for v in args.values],
                                        engines=None if args.engine == "all" else [args.engine],
-                                       runs_root=args.runs, seeds=args.seeds),
+                                       runs_root=args.runs, seeds=args.seeds, reference=args.reference,
+                                       full=args.full, target_error=args.target_error),
                            f"ladder of {args.case}, knob {args.knob}: the runs before any of them", args.workers)
     out = ladder(args.case, args.knob, [_val(v) for v in args.values],
                  engines=None if args.engine == "all" else [args.engine], runs_root=args.runs,
@@ -127,6 +160,7 @@ def _print_plan(plan, title: str, workers: int | None) -> int:
     to run on one worker and on ``workers`` (each run's estimate; no packing, mesh or run
     directory); 0, or 2 when every run is refused."""
     import pandas as pd
+    from rich.markup import escape
 
     from ..humanize import fmt_s
     show = plan.drop(columns=["run_dir", "note"]).copy()
@@ -145,7 +179,16 @@ def _print_plan(plan, title: str, workers: int | None) -> int:
     con.print(counts + (f": ~{fmt_s(total)} of engine time on one worker"
                         + (f", at least ~{fmt_s(max(total / n_w, longest))} on {n_w}" if n_w > 1 and len(todo) > 1 else "")
                         + " (each run's estimate, as `run --dry-run` prints it)" if len(todo) else ": nothing to run"))
-    return 2 if len(plan) and (plan["status"] == "refused").all() else 0
+    refused = int((plan["status"] == "refused").sum())
+    for why in dict.fromkeys(plan.loc[plan["status"] == "refused", "note"].astype(str)):
+        con.print(escape(f"refused: {why}"))        # in full: the table's note column may be cut to its width
+    if len(plan) and refused == len(plan):
+        con.print("[red]every run is refused[/red] (the reasons above): fix the values given; nothing would run")
+        return 2
+    if refused:     # docs/stability.md: an invalid point fails alone, the others still run
+        con.print(f"[yellow]{refused} run(s) refused[/yellow] (the reasons above): a real run leaves them out "
+                  "(marked failed) and runs the others")
+    return 0
 
 
 def _val(v: str):
@@ -153,12 +196,37 @@ def _val(v: str):
     return yaml.safe_load(v)
 
 
+def _every_point_refused(args) -> bool:
+    """Whether the loader refuses every point of ``sweep`` (checked before the sweep creates its
+    folder or starts a worker): then each point's reason goes to stderr and the sweep is bad input
+    (status 2), as the dry run says. Some points refused: the sweep runs the others (an invalid
+    point fails alone, docs/stability.md)."""
+    from ..case import CaseError, load_case
+    from .sweep import nested, parse_sets, points, refuse_unknown_fields
+    sets = parse_sets(args.set)
+    refuse_unknown_fields(load_case(args.case), args.case, list(sets))
+    why = []
+    for pt in points(sets, args.grid):
+        try:
+            load_case(args.case, overrides=nested(pt))
+            return False
+        except CaseError as exc:
+            why.append((pt, exc))
+    print(f"error: sweep of {args.case}: every point is refused, nothing to run; fix the values given:", file=sys.stderr)
+    for pt, exc in why:
+        print(f"  {', '.join(f'{k}={v}' for k, v in pt.items())}: {exc}", file=sys.stderr)
+    return True
+
+
 def cmd_sweep(args) -> int:
     from .sweep import sweep, sweep_plan
+    _check_workers(args)
     if args.dry_run:
         return _print_plan(sweep_plan(args.case, args.set, grid=args.grid,
                                       engines=None if args.engine == "all" else [args.engine], runs_root=args.runs),
                            f"sweep of {args.case}: the runs before any of them", args.workers or os.cpu_count())
+    if _every_point_refused(args):
+        return 2
     df = sweep(args.case, args.set, grid=args.grid, engines=None if args.engine == "all" else [args.engine],
                runs_root=args.runs, scheduler=args.scheduler, workers=args.workers, on_result=_say_run_ended(console()),
                force=args.force)
@@ -167,9 +235,26 @@ def cmd_sweep(args) -> int:
     return 1 if len(failed) else 0
 
 
+def _mu_list(text: str) -> list[float]:
+    """``--mu 0.1,0.3,0.6``: the friction coefficients, or a ValueError naming --mu and the form."""
+    form = "give comma-separated friction coefficients of at least 0, e.g. --mu 0.2,0.4,0.6"
+    parts = [x.strip() for x in text.split(",")]
+    if not text.strip() or any(x == "" for x in parts):
+        raise ValueError(f"--mu {text!r}: an empty value; {form}")
+    out = []
+    for x in parts:
+        try:
+            out.append(float(x))
+        except ValueError:
+            which = "" if x == text.strip() else f": {x!r}"
+            raise ValueError(f"--mu {text!r}{which} is not a number; {form}") from None
+    return out
+
+
 def cmd_calibrate(args) -> int:
     from .calibration import calibrate
-    mus = [float(x) for x in args.mu.split(",")]
+    _check_workers(args)
+    mus = _mu_list(args.mu)
     out = calibrate(args.case, mus, target=args.target, engines=None if args.engine == "all" else [args.engine],
                     runs_root=args.runs, scheduler=args.scheduler, workers=args.workers,
                     plot=args.plot or Path(args.runs) / "calibration" / f"{Path(args.case).stem}.png")

@@ -37,14 +37,30 @@ KNOBS = ("dt_fraction", "stiffness_scale", "rate_scale", "particle_scale", "coun
 _RATE_FIELDS = ("inertial_number", "compression_inertial_number", "quasi_static_number")
 
 
+def checked_value(case_path, knob: str, value):
+    """``value`` as the knob ``knob`` takes it: a finite number for the knobs of :data:`KNOBS`, a
+    whole one (an int) for ``count``; anything for a dotted field (the case's validation decides).
+    A :class:`CaseError` naming the case, the knob and the value otherwise: ``--values 1.5`` of
+    ``count`` was read as 1 grain."""
+    if knob not in KNOBS:
+        return value
+    try:
+        if isinstance(value, bool):
+            raise ValueError
+        x = float(value)
+        if not math.isfinite(x) or (knob == "count" and not x.is_integer()):
+            raise ValueError
+    except (TypeError, ValueError):
+        say = ("is not a whole number of grains; give whole numbers, e.g. --values 100 200 400" if knob == "count"
+               else "is not a number; give finite numbers, e.g. --values 0.5 1 2")
+        shown = str(value).lower() if isinstance(value, bool) else repr(value)      # as written: true, not True
+        raise CaseError(case_path, [f"--knob {knob} --values: {shown} {say}"]) from None
+    return int(x) if knob == "count" else x
+
+
 def knob_overrides(case_path, knob: str, value) -> dict:
     """The nested overrides that set ``knob`` to ``value`` on the case at ``case_path``."""
-    if knob in KNOBS:
-        try:
-            float(value) if knob != "count" else int(value)
-        except (TypeError, ValueError):
-            kind = "a whole number of grains" if knob == "count" else "a number"
-            raise CaseError(case_path, [f"--knob {knob} --values: {value!r} is not {kind}"]) from None
+    value = checked_value(case_path, knob, value)
     if knob == "dt_fraction":
         return {"timestep": {"fraction": float(value)}}
     base = load_case(case_path)
@@ -121,13 +137,68 @@ def ladder_tasks(case_path, knob: str, values: list, engine: str, runs_root="run
     return tasks
 
 
+def _number(v) -> float | None:
+    try:
+        return None if isinstance(v, bool) else float(v)
+    except (TypeError, ValueError):
+        return None
+
+
+def reference_value(values: list, reference=None):
+    """The rung of ``values`` that is the reference: the last, or the one ``reference`` names (as
+    written, or the same number: ``--reference 0.50`` is the rung 0.5); a ValueError naming
+    ``--reference`` and the values when it is none of them."""
+    if not values:
+        raise ValueError("--values: no values; give the ladder's values, cheapest first, e.g. --values 0.4 0.2 0.1")
+    if reference is None:
+        return values[-1]
+    for v in values:
+        if str(v) == str(reference):
+            return v
+    r = _number(reference)
+    for v in values:
+        if r is not None and _number(v) == r:
+            return v
+    raise ValueError(f"--reference {reference}: not one of the ladder's --values ({' '.join(map(str, values))}); "
+                     f"give one of them, or leave --reference out for the last ({values[-1]})")
+
+
+#: knobs whose ideal limit is at 0 (h = value) and those whose ideal limit is infinity (h = value^-p)
+_LIMIT_AT_ZERO = ("dt_fraction", "rate_scale")
+_LIMIT_AT_INFINITY = ("stiffness_scale", "count", "size_scale")
+
+
+def check_ladder(case_path, knob: str, values: list, reference=None, full=None, target_error: float = 0.05):
+    """Check a ladder's inputs before anything is planned or run: every value (:func:`checked_value`),
+    ``reference`` among them (:func:`reference_value`), ``full`` a value the extrapolation can reach
+    and ``target_error`` a positive number. Returns the reference rung's value."""
+    for v in values:
+        checked_value(case_path, knob, v)
+    ref = reference_value(values, reference)
+    if full is not None:
+        f = _number(full)
+        if f is None or not math.isfinite(f) or (knob in _LIMIT_AT_INFINITY and f <= 0) or \
+                (knob in _LIMIT_AT_ZERO and f < 0):
+            least = " above 0" if knob in _LIMIT_AT_INFINITY else " of at least 0" if knob in _LIMIT_AT_ZERO else ""
+            raise ValueError(f"--full {full}: the knob {knob}'s full-fidelity value must be a finite number{least}; "
+                             f"give the {knob} of the setting to extrapolate to, or leave --full out for the ideal "
+                             f"limit")
+    t = _number(target_error)
+    if t is None or not math.isfinite(t) or t <= 0:
+        raise ValueError(f"--target-error {target_error}: the relative error to stay within must be a number above 0, "
+                         f"e.g. --target-error 0.05 (5 %)")
+    return ref
+
+
 def ladder_plan(case_path, knob: str, values: list, engines: list[str] | None = None, runs_root="runs",
-                seeds: list[int] | None = None):
+                seeds: list[int] | None = None, reference=None, full=None, target_error: float = 0.05):
     """What a ladder would run, before any run (``orchestrator convergence ... --dry-run``): the
-    table of :func:`.sweep.plan_table`, a row per engine, rung (column ``knob``) and seed."""
+    table of :func:`.sweep.plan_table`, a row per engine, rung (column ``knob``) and seed. The
+    inputs a real ladder would refuse (:func:`check_ladder`) are refused here too."""
     import pandas as pd
     case0 = load_case(case_path)
     refuse_unknown_fields(case0, case_path, [knob], also=KNOBS, flag="--knob")
+    check_ladder(case_path, knob, values, reference, full, target_error)
     tasks = [t for eng in engines or case0.engines for t in ladder_tasks(case_path, knob, values, eng, runs_root, seeds)]
     table = plan_table(tasks)
     cols = pd.DataFrame({knob: [t["point"][knob] for t in tasks], "seed": [t["seed"] for t in tasks]})
@@ -149,6 +220,7 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
     import pandas as pd
     case0 = load_case(case_path)
     refuse_unknown_fields(case0, case_path, [knob], also=KNOBS, flag="--knob")
+    ref_v = check_ladder(case_path, knob, values, reference, full, target_error)    # before any executor starts
     scene = get_scene(case0.scene.kind)
     engines = engines or case0.engines
     rows = []
@@ -177,7 +249,6 @@ def ladder(case_path, knob: str, values: list, engines: list[str] | None = None,
                 results[todo[j]] = res
                 if on_result:
                     on_result(tasks[todo[j]], res)
-            ref_v = values[-1] if reference is None else values[[str(v) for v in values].index(str(reference))]
             # the reference rung's run of each seed (the ladder's one run without seeds)
             ref_of = {t["seed"]: k for k, t in enumerate(tasks) if str(t["point"][knob]) == str(ref_v)}
             ref_obs_of = {sd: (results[k] or {}).get("observables") or {} for sd, k in ref_of.items()}
