@@ -209,7 +209,8 @@ class Engine(ABC):
             asked = CASE_FIELDS.get(f)
             raise UnsupportedFeature(f"{self.name} cannot simulate '{f}'"
                                      + (f" (asked by the case's {asked}; remove it to use {self.name}'s own)" if asked else "")
-                                     + " and offers no substitute; run this case on another engine (engines: [...])")
+                                     + " and offers no substitute; run this case on another engine (`orchestrator engines` lists what "
+                                       "each one simulates)")
         return subs
 
     def print_monitors(self, deck_text: str, overlap_limit: float) -> str:

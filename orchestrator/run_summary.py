@@ -22,6 +22,8 @@ def read_summary(run_dir) -> dict | None:
     try:
         s = json.loads(p.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError):
+        s = None
+    if not isinstance(s, dict):          # cut short, or not a summary at all
         return {"status": "interrupted", "error": f"{p}: unreadable (cut short); the run is resumed or redone"}
     if s.get("status") == "running" and not lock_held(Path(run_dir)):
         s["status"] = "interrupted"

@@ -117,10 +117,14 @@ def test_status_shows_a_run_with_missing_figures_and_names_a_damaged_summary(run
     damaged = tmp_path / "runs" / "c" / "yade-0"
     damaged.mkdir(parents=True)
     (damaged / "summary.json").write_text('{"status": "compl')
-    r = main_here("status", run, damaged)
+    not_a_summary = tmp_path / "runs" / "c" / "yade-1"                 # valid JSON, not a mapping
+    not_a_summary.mkdir(parents=True)
+    (not_a_summary / "summary.json").write_text('["complete"]')
+    r = main_here("status", run, damaged, not_a_summary)
     assert r.returncode == 0 and "Traceback" not in r.stderr + r.stdout, r.stdout + r.stderr
     assert "complete" in r.stdout and "interrupted" in r.stdout
-    assert f"damaged: {damaged / 'summary.json'}: unreadable" in r.stdout
+    for d in (damaged, not_a_summary):
+        assert f"damaged: {d / 'summary.json'}: unreadable" in r.stdout
 
 
 def test_an_output_file_that_is_a_directory_is_named_and_nothing_is_left(run, tmp_path):
@@ -141,3 +145,10 @@ def test_an_output_directory_that_is_a_file_is_named_with_the_fix(run, tmp_path)
     f.write_text("")
     for args in (("vtk", run, "--frame", "0", "--out", f), ("analyze", run, "--analysis", "coordination", "--out", f)):
         bad_input(main_here(*args), f"{f}: exists and is not a directory", "give --out", "an existing directory")
+
+
+def test_report_names_a_damaged_summary_and_the_fix(run):
+    for text, why in (('{"status": "compl', "not JSON"), ('["complete"]', "a JSON list, not a record")):
+        (run / "summary.json").write_text(text)
+        bad_input(main_here("report", run, "--out", run / "r.html"), f"{run / 'summary.json'}: damaged: {why}",
+                  "the same `orchestrator run` command")

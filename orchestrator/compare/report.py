@@ -150,6 +150,21 @@ def _steps_row(run_dir: Path, run: int, planned: int) -> dict:
                   "status": "ok" if whole else "FAIL"}
 
 
+def _json_record(path: Path) -> dict:
+    """A run's JSON record (``summary.json``, ``analysis_summary.json``) as a mapping, or a
+    ValueError naming the file and the fix (a damaged record, not a parser's message)."""
+    try:
+        data = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        data = exc
+    if not isinstance(data, dict):
+        why = f"not JSON ({data})" if isinstance(data, Exception) else f"a JSON {type(data).__name__}, not a record"
+        fix = (f"`orchestrator analyze {path.parent.parent}` writes it again" if path.name == "analysis_summary.json"
+               else "run the case again: the same `orchestrator run` command resumes or redoes it")
+        raise ValueError(f"{path}: damaged: {why}; {fix}")
+    return data
+
+
 def run_checks(run_dir, frames=None, summary: dict | None = None) -> pd.DataFrame:
     """Stability and protocol checks of a run, from summary.json, ``*_checks.json`` and the frames.
 
@@ -284,7 +299,7 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
         run_dir = run_dir.parent
     fr = Frames(run_dir)
     summ_path = run_dir / "summary.json"
-    summary = json.loads(summ_path.read_text()) if summ_path.exists() else {}
+    summary = _json_record(summ_path) if summ_path.exists() else {}
     case_file = run_dir / "case.yaml"
     case_text = case_file.read_text() if case_file.exists() else None
     # a damaged case.yaml is a CaseError naming it (not a YAML parser's traceback)
@@ -293,7 +308,7 @@ def write_run_report(run_dir, out=None, analyses=None, rerun: bool = False) -> P
     adir = run_dir / "analysis"
     asum_path = adir / "analysis_summary.json"
     specs = analyses if analyses is not None else ((case or {}).get("analysis") or DEFAULT_ANALYSES.get(kind, []))
-    asum = json.loads(asum_path.read_text()) if asum_path.exists() else None
+    asum = _json_record(asum_path) if asum_path.exists() else None
     if specs and (rerun or analyses is not None or asum is None):
         # analyses named for the report join the run's record; the case's own list replaces it
         _, asum = analyze_run(run_dir, specs, by_name=analyses is not None)
