@@ -206,7 +206,9 @@ def cmd_verify(args) -> int:
     engines = list(engine_names()) if args.engine == "all" else [args.engine]
     cases = [p for p in verification_cases() if not args.case or any(c in p.stem for c in args.case)]
     if not cases:
-        print(f"error: no verification case matches {args.case}", file=sys.stderr)
+        names = ", ".join(p.stem for p in verification_cases())
+        print(f"error: --case {' '.join(args.case)}: no verification case's name contains it; the cases: {names}",
+              file=sys.stderr)
         return 2
     tab = run_verification(engines=engines, cases=cases, runs_root=args.runs, force=args.force)
     con = console()

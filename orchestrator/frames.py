@@ -359,8 +359,11 @@ class Frames:
         path = Path(path)
         if path.is_dir():
             path = path / "frames.h5"
+        elif not path.exists():
+            raise FileNotFoundError(f"{path}: no such run directory or frames.h5 file; check the path")
         if not path.exists():
-            raise FileNotFoundError(f"{path}: no frames.h5 here (is the run complete?)")
+            raise FileNotFoundError(f"{path}: no frames.h5 here (is the run complete? `orchestrator status "
+                                    f"{path.parent}` says how far it got)")
         self.path = path
         with _open_h5(path) as h:
             self.ids = h["particles/id"][()]

@@ -152,3 +152,13 @@ def test_report_names_a_damaged_summary_and_the_fix(run):
         (run / "summary.json").write_text(text)
         bad_input(main_here("report", run, "--out", run / "r.html"), f"{run / 'summary.json'}: damaged: {why}",
                   "the same `orchestrator run` command")
+
+
+def test_a_missing_path_and_a_run_without_frames_are_told_apart(tmp_path):
+    bad_input(main_here("vtk", tmp_path / "nosuch"), f"{tmp_path / 'nosuch'}: no such run directory or frames.h5 file")
+    bad_input(main_here("vtk", tmp_path), f"{tmp_path / 'frames.h5'}: no frames.h5 here", "orchestrator status")
+
+
+def test_verify_names_the_cases_when_none_matches():
+    r = main_here("verify", "--case", "nosuch")
+    assert r.returncode == 2 and "--case nosuch" in r.stderr and "chung_ooi_4_oblique" in r.stderr
