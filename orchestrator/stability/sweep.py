@@ -112,7 +112,7 @@ def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]
     except CaseError as exc:                 # an invalid point fails alone, the others still run
         return [{"case": str(case_path), "overrides": ov, "engine": eng, "runs_root": str(runs_root),
                  "point": pt, "run_dir": None, "run_id": None, "done": False, "invalid": str(exc)}
-                for eng in (engines or ["?"])]
+                for eng in (engines or load_case(case_path).engines)]     # the case's own engines
     tasks = []
     for eng in (engines or case.engines):
         rd = run_dir_for(case, eng, runs_root)
