@@ -246,6 +246,10 @@ def cmd_analyze(args) -> int:
         print(f"error: {run_dir}: not a run directory (no frames.h5); it holds the runs "
               f"{', '.join(str(p) for p in inside)}: give one of them", file=sys.stderr)
         return 2
+    if run_dir.is_dir() and not (run_dir / "frames.h5").exists():
+        print(f"error: {run_dir}: no frames.h5 here (is the run complete? `orchestrator status {run_dir}` says how "
+              f"far it got)", file=sys.stderr)
+        return 2
     try:
         specs = [parse_cli_spec(a) for a in args.analysis or []]
         parse_specs(specs, where="--analysis")
@@ -258,7 +262,7 @@ def cmd_analyze(args) -> int:
         case_file = run_root / "case.yaml"             # a damaged one is a CaseError naming it
         specs = (yaml_or_case_error(case_file) or {}).get("analysis", []) if case_file.exists() else []
     if not specs:
-        print(f"{run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
+        print(f"error: {run_dir}: no analyses asked for (give --analysis NAME or list them in the case)", file=sys.stderr)
         return 2
     out_dir = Path(args.out) if args.out else run_root / "analysis"
     # an output directory the user may not write is said before the analysis stack is imported (~4 s)

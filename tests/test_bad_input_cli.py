@@ -162,3 +162,8 @@ def test_a_missing_path_and_a_run_without_frames_are_told_apart(tmp_path):
 def test_verify_names_the_cases_when_none_matches():
     r = main_here("verify", "--case", "nosuch")
     assert r.returncode == 2 and "--case nosuch" in r.stderr and "chung_ooi_4_oblique" in r.stderr
+
+
+def test_analyze_of_a_run_without_frames_says_so(tmp_path):
+    bad_input(main_here("analyze", tmp_path, "--analysis", "coordination"), f"{tmp_path}: no frames.h5 here",
+              "orchestrator status")
