@@ -57,6 +57,7 @@ def _dtype(s):
         raise argparse.ArgumentTypeError(f"{s!r} is not a numeric data type; give e.g. uint8, uint16 or float32")
     return s
 
+
 def _deferred(name):
     """The handler ``name`` of :mod:`.commands`, imported when the sub-command runs: the parser alone,
     built for ``orchestrator --help``, then loads no imaging stack."""
