@@ -100,6 +100,28 @@ class Comparison:
         d = d[np.isfinite(d)]
         return float(d.max()) if len(d) else float("nan")
 
+    def __repr__(self) -> str:
+        """One line: the two sides, the states matched, the measures computed, the largest distance
+        and the grain-by-grain error (a dataclass's own repr printed every table)."""
+        al = self.alignment
+        done = [m for m, o in self.outcomes.items() if not o.skipped and not o.error]
+        said = [f"{len(al.states)} states by {al.control}", f"{len(done)} of {len(self.outcomes)} measures",
+                f"largest distance {self.max_distance():.3g}"]
+        if self.grain is not None:
+            g = self.grain.scalars
+            said.append(f"grain by grain ({g.get('identity')}, {g.get('grains_identified')} grains): median "
+                        f"trajectory error up to {g.get('max_median_error_d50', float('nan')):.3g} d50")
+        return f"<Comparison {al.a.label} vs {al.b.label}: {', '.join(said)}>"
+
+    def _repr_html_(self) -> str:
+        """In a notebook: the line of :meth:`__repr__`, then the largest distance of every measure and
+        quantity (the full table: ``.table``)."""
+        import html
+        t = self.table
+        top = (t.assign(abs_distance=t["distance"].abs()).groupby(["measure", "quantity", "metric"], sort=False)
+               ["abs_distance"].max().rename("largest |distance|").reset_index())
+        return f"<p><code>{html.escape(repr(self))}</code></p>" + top.to_html(index=False, float_format="{:.3g}".format)
+
     def summary(self) -> dict:
         return {"alignment": self.alignment.summary(),
                 "measures": {k: {"rows": len(o.rows), "skipped": o.skipped, "error": o.error,

@@ -54,6 +54,18 @@ class CrossValidation:
         """The comparison of the first two engines (A with the first B)."""
         return next(iter(self.comparisons.values()))
 
+    def __repr__(self) -> str:
+        runs = ", ".join(f"{e} {'reused' if o.reused else 'ran'}" for e, o in self.runs.items())
+        return (f"<CrossValidation {self.case.name}: {runs} ({self.mode}); "
+                f"{'; '.join(repr(c) for c in self.comparisons.values())}>")
+
+    def _repr_html_(self) -> str:
+        """In a notebook: the engines' wall times, then each comparison as it shows itself."""
+        import html
+        head = (f"<p><code>CrossValidation {html.escape(self.case.name)}</code>: runs {html.escape(self.mode)}</p>"
+                + self.wall_times.to_html(index=False))
+        return head + "".join(c._repr_html_() for c in self.comparisons.values())
+
     @property
     def wall_times(self) -> pd.DataFrame:
         return pd.DataFrame(self.engines)

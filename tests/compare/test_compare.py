@@ -77,6 +77,12 @@ def test_crossval_smoke_produces_every_table_and_plot(crossval_smoke):
     html = (out / "report.html").read_text()
     assert "wall time" in html.lower() and html.count("data:image/png;base64,") >= 3 * len(MEASURES) - 2
     assert "http://" not in html and "https://" not in html
+    # in a notebook: one line each, and tables in HTML (a dataclass's repr printed every DataFrame)
+    line = repr(cv)
+    assert "\n" not in line and line.startswith("<CrossValidation shear_cell_smoke:")
+    assert "<Comparison liggghts vs yade:" in line and f"{len(MEASURES)} of {len(MEASURES)} measures" in line
+    page = cv._repr_html_()
+    assert page.count("<table") == 2 and "largest |distance|" in page and "wall_time_total_s" in page
 
 
 def test_crossval_on_three_engines_compares_the_first_with_each(crossval_smoke, runs_root, tmp_path):
