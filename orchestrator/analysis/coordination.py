@@ -117,7 +117,8 @@ def analyze_coordination(frames, at=None, control: str | None = None, stride: in
     s = pd.DataFrame(summ)
     return Result("coordination", tables={"particles": pd.concat(parts, ignore_index=True),
                                           "distribution": pd.concat(dists, ignore_index=True), "summary": s},
-                  scalars={"mean_z_last": float(s["mean_z"].iloc[-1]), "source": str(s["source"].iloc[-1])},
+                  scalars={"mean_z_last": float(s["mean_z"].iloc[-1]), "source": str(s["source"].iloc[-1]),
+                           "control": cname},
                   options={"source": source, "tolerance": tolerance, "include_walls": include_walls,
                            "cutoff": cutoff},
                   plotter=plot_coordination)

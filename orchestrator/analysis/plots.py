@@ -26,6 +26,26 @@ def _fig(ncols=1, nrows=1, w=5.0, h=3.8, polar=False):
     return fig, axes
 
 
+def _state(control: str | None, value: float) -> str:
+    """A frame's state in its control's own terms, for a legend: ``ε_a = 1 %``, ``39.5°``,
+    ``t = 0.12 s`` (controls in SI: strains as fractions, angles in rad)."""
+    if control == "axial_strain":
+        return f"ε_a = {100 * value:.3g} %"
+    if control == "angle":
+        return f"{np.degrees(value):.3g}°"
+    if control == "shear_strain":
+        return f"γ = {value:.3g}"
+    if control == "time":
+        return f"t = {value:.3g} s"
+    return f"{value:.4g}"
+
+
+def _control_axis(control: str | None) -> tuple[str, float]:
+    """An axis label for a control and the factor from its SI values to the axis' (rad to deg)."""
+    return {"axial_strain": ("axial strain ε_a", 1.0), "angle": ("angle [deg]", 180 / np.pi),
+            "shear_strain": ("shear strain γ", 1.0), "time": ("time [s]", 1.0)}.get(control, (control or "control", 1.0))
+
+
 def _label(g, col="control1"):
     return f"{g[col].iloc[0]:.4g}" if col in g else ""
 
@@ -83,7 +103,8 @@ def plot_rdf(res, **kw):
     t = res.tables["rdf"]
     fig, (ax,) = _fig()
     for k, g in t.groupby("frame"):
-        ax.errorbar(g["r_d50"], g["g"], yerr=g["g_err"], lw=1, label=f"frame {k} ({g['control'].iloc[0]:.4g})")
+        ax.errorbar(g["r_d50"], g["g"], yerr=g["g_err"], lw=1,
+                    label=f"frame {k} ({_state(res.scalars.get('control'), g['control'].iloc[0])})")
     ax.axhline(1, color="k", lw=0.5)
     ax.set_xlabel(r"$r/d_{50}$"); ax.set_ylabel("g(r)")
     ax.set_title("edge-corrected" if res.scalars.get("edge_correction") else "no edge correction", fontsize=9)
@@ -99,7 +120,8 @@ def plot_coordination(res, **kw):
     w = 0.8 / max(len(ks), 1)
     for n, k in enumerate(ks):
         g = t[t["frame"] == k]
-        ax.bar(g["z"] + (n - (len(ks) - 1) / 2) * w, g["p"], width=w, label=f"frame {k} ({g['control'].iloc[0]:.4g})")
+        ax.bar(g["z"] + (n - (len(ks) - 1) / 2) * w, g["p"], width=w,
+               label=f"frame {k} ({_state(res.scalars.get('control'), g['control'].iloc[0])})")
     ax.set_xlabel("coordination number Z"); ax.set_ylabel("P(Z)")
     ax.legend(fontsize=7)
     return fig
@@ -291,10 +313,11 @@ def plot_energy(res, **kw):
     """K/U per frame (log scale) against the control, with the seed's quasi-static bound."""
     s = res.tables["summary"]
     fig, (ax,) = _fig()
-    ax.semilogy(s["control"], s["ratio"], "o-", ms=3, label="K / U (kinetic / Hertz elastic)")
-    ax.semilogy(s["control"], s["ratio_nonaffine"], "s-", ms=3, label="K' / U (non-affine kinetic)")
+    xlabel, scale = _control_axis(res.scalars.get("control"))
+    ax.semilogy(s["control"] * scale, s["ratio"], "o-", ms=3, label="K / U (kinetic / Hertz elastic)")
+    ax.semilogy(s["control"] * scale, s["ratio_nonaffine"], "s-", ms=3, label="K' / U (non-affine kinetic)")
     ax.axhline(res.scalars["limit"], color="k", ls="--", lw=1, label=f"seed 001 §3.2 bound {res.scalars['limit']:g}")
-    ax.set_xlabel(res.scalars.get("control", "control")); ax.set_ylabel("K / U")
+    ax.set_xlabel(xlabel); ax.set_ylabel("K / U")
     ax.legend(fontsize=8)
     return fig
 

@@ -154,5 +154,6 @@ def analyze_rdf(frames, r_max: float | None = None, r_max_d50: float = 5.0, bins
         loc = [m for m in range(1, len(sm) - 1) if sm[m] <= sm[m - 1] and sm[m] < sm[m + 1]]
         if loc:
             scal["first_min_d50"] = float(last["r_d50"].iloc[ip + loc[0]])
+    scal["control"] = cname                 # what the frames' "control" column holds (their legends)
     return Result("rdf", tables={"rdf": t}, scalars=scal,
                   options={"r_max": rmax, "bins": bins, "edge_correction": edge_correction}, plotter=plot_rdf)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from orchestrator.analysis.shearband import (analyze_shearband, erf_profile, fit_erf_profile, rotation_center)
-from conftest import CENTER, D, W_SB, Z_SB
+from tests.analysis.conftest import CENTER, D, W_SB, Z_SB
 
 
 def test_noisy_erf_profile_recovered_within_uncertainty():
