@@ -54,6 +54,31 @@ class Result:
         t = ", ".join(f"{k}[{len(v)}]" for k, v in self.tables.items())
         return f"Result({self.name!r}, tables: {t}, scalars: {self.scalars})"
 
+    def _repr_html_(self) -> str:
+        """In a notebook: the scalars as a table, the tables' names and sizes, and the plot inline
+        (a PNG in the page: the notebook stays self-contained)."""
+        import base64
+        import html
+        import io
+        rows = "".join(f"<tr><td>{html.escape(str(k))}</td><td>{html.escape(_shown(v))}</td></tr>"
+                       for k, v in self.scalars.items())
+        tables = ", ".join(f"<code>{html.escape(k)}</code> ({len(v)} rows)" for k, v in self.tables.items())
+        out = (f"<p><b>{html.escape(self.name)}</b>: tables {tables or 'none'} (<code>result[name]</code>)</p>"
+               + (f"<table><tr><th>scalar</th><th>value</th></tr>{rows}</table>" if rows else ""))
+        if self.plotter is not None:
+            buf = io.BytesIO()
+            try:
+                self.plot().savefig(buf, format="png", dpi=80)
+            except Exception as exc:          # noqa: BLE001 - a plot that fails must not hide the numbers
+                return out + f"<p>(no plot: {html.escape(str(exc))})</p>"
+            out += f'<img src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}"/>'
+        return out
+
+
+def _shown(v) -> str:
+    """A scalar as a notebook shows it: floats to 4 significant figures."""
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
 
 def present(position: np.ndarray) -> np.ndarray:
     """Boolean mask of rows that are present (no NaN coordinate); works on (N,3) or (T,N,3)."""

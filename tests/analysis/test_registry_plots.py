@@ -26,6 +26,14 @@ def test_every_plot_function_is_used_and_returns_a_figure(results):
     assert used == set(plots.__all__)
 
 
+def test_a_result_shows_itself_in_a_notebook_with_its_plot(results):
+    """``Result._repr_html_``: the scalars, the tables' sizes and the plot as an inline PNG."""
+    res = results["rdf"]
+    page = res._repr_html_()
+    assert "<b>rdf</b>" in page and "<code>rdf</code>" in page and page.count('src="data:image/png;base64,') == 1
+    assert "first_peak_d50" in page and f"{res.scalars['first_peak_d50']:.4g}" in page
+
+
 def test_run_analyses_writes_csv_png_and_summary(shear_cell, tmp_path):
     specs = ["rdf", {"d2min": {"pairs": [[0, 5]]}}, {"rdf": {"edge_correction": False}},
              {"friction": {"torque_wall": "bottom"}}]      # the bottom wall has no torque: error
