@@ -5,6 +5,7 @@ command table (``orchestrator --help``) then imports none of it; each command im
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -154,6 +155,8 @@ def case_differences(a, b) -> tuple[list[str], list[str]]:
 def cmd_crossval(args) -> int:
     from .compare.crossval import crossval
     con = console()
+    if args.dry_run:
+        return _crossval_dry_run(args)
     if args.ladder:
         return cmd_ladder(args, con)
     conc = {"auto": "auto", "yes": True, "no": False}[args.concurrent]
@@ -171,6 +174,23 @@ def cmd_crossval(args) -> int:
         _print_table(cmp, con)
         con.print(f"wrote {cmp.files['table']} and {cmp.files['html']}")
     return 0
+
+
+def _crossval_dry_run(args) -> int:
+    """``crossval --dry-run`` (and ``--ladder --dry-run``): every run, reused or to run, its estimate,
+    and the total, as ``sweep --dry-run`` prints them; nothing is packed or run."""
+    from .stability.cli import _print_plan
+    if args.ladder:
+        from .compare.ladder import ladder_plan
+        plan = ladder_plan(args.case, engines=args.engine, seeds=args.seeds, runs_root=args.runs, rungs=args.rung)
+        return _print_plan(plan, f"crossval --ladder of {args.case}: the runs before any of them",
+                           args.workers or (os.cpu_count() if args.scheduler is None else None))
+    from .compare.crossval import crossval_plan
+    conc = {"auto": "auto", "yes": True, "no": False}[args.concurrent]
+    plan, at_once, mode = crossval_plan(args.case, engines=args.engine, runs_root=args.runs, concurrent=conc)
+    code = _print_plan(plan, f"crossval of {args.case}: the runs before any of them", at_once)
+    console().print(f"runs: {mode}")
+    return code
 
 
 def cmd_report(args) -> int:
@@ -221,6 +241,8 @@ def add_parsers(sub) -> None:
                    help="engine to run (repeatable, the first is the reference A; default the case's engines)")
     x.add_argument("--scheduler", help="Dask scheduler address for --ladder (default: local processes)")
     x.add_argument("--workers", type=int, help="local worker processes for --ladder (default one per core)")
+    x.add_argument("--dry-run", action="store_true", help="list every run (reused or to run) with its estimate and "
+                                                          "the total; run nothing")
     x.set_defaults(func=cmd_crossval)
 
     r = sub.add_parser("report", help="self-contained HTML page of one run (case, substitutions, checks, "

@@ -163,6 +163,19 @@ def test_crossval_of_a_one_engine_case_names_the_fix_before_running(tmp_path):
     assert not any(tmp_path.iterdir())                                  # nothing ran
 
 
+def test_crossval_dry_run_lists_each_engines_run_and_runs_nothing(tmp_path):
+    r = main_here("crossval", REPO / "cases" / "shear_cell_smoke.yaml", "--engine", "liggghts", "--engine", "yade",
+                  "--dry-run", "--concurrent", "no", "--runs", tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "2 run(s) to do, 0 reused, 0 refused" in r.stdout and "runs: sequential (forced)" in r.stdout
+    assert "liggghts" in r.stdout and "yade" in r.stdout and "228" in r.stdout
+    r = main_here("crossval", REPO / "cases" / "shear_cell_smoke.yaml", "--ladder", "--rung", "L0", "--seeds", "1", "2",
+                  "--engine", "liggghts", "--engine", "yade", "--dry-run", "--runs", tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "4 run(s) to do" in r.stdout and "L0" in r.stdout               # 1 rung x 2 seeds x 2 engines
+    assert not any(tmp_path.iterdir())                                    # nothing packed, no run directory
+
+
 @pytest.mark.engine
 def test_crossval_command_writes_table_report_and_wall_times(runs_root, engines_installed):
     """In the session's runs directory: the engine runs the verification tests made of this case are

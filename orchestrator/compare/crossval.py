@@ -27,7 +27,7 @@ from .core import Comparison, compare
 from ..analysis._common import atomic_write_csv
 from .report import write_compare_report
 
-__all__ = ["CrossValidation", "crossval", "free_cores"]
+__all__ = ["CrossValidation", "crossval", "crossval_plan", "free_cores"]
 
 
 def free_cores() -> float:
@@ -91,25 +91,8 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
     """
     if not isinstance(case, Case):
         case = load_case(case)
-    engines = list(dict.fromkeys(case.engines if engines is None else engines))
-    unknown = [e for e in engines if e not in engine_names()]
-    if unknown:
-        raise ValueError(f"crossval: unknown engine(s) {unknown}; installed engines: {', '.join(engine_names())}")
-    if len(engines) < 2:
-        where = case.source or case.name
-        raise ValueError(
-            f"{where}: `engines` lists {engines or 'no engine'}, and cross-validation needs two; name them "
-            f"with --engine (e.g. `orchestrator crossval {where} --engine liggghts --engine yade`) or list "
-            f"two in the case's `engines`")
-    _refuse(case, engines)
-    fc = free_cores()
-    if concurrent == "auto":
-        conc = fc >= 2
-        mode = (f"concurrent ({fc:.1f} cores free)" if conc else
-                f"sequential (only {fc:.1f} of {os.cpu_count()} cores free; concurrency needs 2)")
-    else:
-        conc = bool(concurrent)
-        mode = "concurrent (forced)" if conc else "sequential (forced)"
+    engines = checked_engines(case, engines)
+    conc, mode = _mode(concurrent)
     t0 = time.perf_counter()
     runs, elapsed = {}, {}
     if conc:
@@ -146,6 +129,46 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
     for b, cmp in cmps.items():
         _write(cv, cmp, out_dir if len(cmps) == 1 else out_dir / f"{a}_vs_{b}")
     return cv
+
+
+def checked_engines(case: Case, engines=None) -> list:
+    """The engines a cross-validation of ``case`` runs (default the case's), checked before anything
+    runs: installed, at least two, and each able to run the case as written (:func:`_refuse`)."""
+    engines = list(dict.fromkeys(case.engines if engines is None else engines))
+    unknown = [e for e in engines if e not in engine_names()]
+    if unknown:
+        raise ValueError(f"crossval: unknown engine(s) {unknown}; installed engines: {', '.join(engine_names())}")
+    if len(engines) < 2:
+        where = case.source or case.name
+        raise ValueError(
+            f"{where}: `engines` lists {engines or 'no engine'}, and cross-validation needs two; name them "
+            f"with --engine (e.g. `orchestrator crossval {where} --engine liggghts --engine yade`) or list "
+            f"two in the case's `engines`")
+    _refuse(case, engines)
+    return engines
+
+
+def _mode(concurrent) -> tuple[bool, str]:
+    """Whether the engines run side by side, and why: ``"auto"`` when two cores are free."""
+    if concurrent == "auto":
+        fc = free_cores()
+        conc = fc >= 2
+        return conc, (f"concurrent ({fc:.1f} cores free)" if conc else
+                      f"sequential (only {fc:.1f} of {os.cpu_count()} cores free; concurrency needs 2)")
+    conc = bool(concurrent)
+    return conc, "concurrent (forced)" if conc else "sequential (forced)"
+
+
+def crossval_plan(case_path, engines=None, runs_root="runs", concurrent="auto"):
+    """What :func:`crossval` would run, before any run (``orchestrator crossval CASE --dry-run``):
+    the engines checked as it checks them, the table of
+    :func:`orchestrator.stability.sweep.plan_table` (each run reused or to run, its size and
+    estimate; no packing, mesh or run directory), and how many run at once (the engines side by
+    side, or one after the other)."""
+    from ..stability.sweep import plan_point, plan_table
+    engines = checked_engines(load_case(case_path), engines)
+    conc, mode = _mode(concurrent)
+    return plan_table(plan_point(case_path, {}, engines, runs_root)), (len(engines) if conc else 1), mode
 
 
 def _refuse(case: Case, engines: list) -> None:

@@ -126,20 +126,40 @@ def _flatten(obs: dict) -> dict:
     return out
 
 
+def ladder_tasks(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", rungs=None) -> list[dict]:
+    """The ladder's runs: one task per rung (or those named in ``rungs``), seed and engine (default
+    the case's), as :func:`orchestrator.stability.executor.run_task` takes them, with ``rung`` and
+    ``seed`` beside."""
+    engines = list(engines or load_case(case_path).engines)
+    return [{"case": str(case_path), "overrides": dict(ov, seed=int(seed)), "engine": eng, "runs_root": str(runs_root),
+             "analyze": False, "rung": rung.name, "seed": int(seed)}
+            for rung, ov in rungs_for(case_path) if rungs is None or rung.name in rungs
+            for seed in seeds for eng in engines]
+
+
+def ladder_plan(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", rungs=None) -> pd.DataFrame:
+    """What the ladder would run, before any run (``orchestrator crossval CASE --ladder --dry-run``):
+    the table of :func:`orchestrator.stability.sweep.plan_table` with the columns ``rung`` and
+    ``seed``: each run reused or to run, its size and estimate (no packing, mesh or run directory)."""
+    from ..runner import run_dir_for
+    from ..stability.sweep import finished, plan_table
+    tasks = []
+    for t in ladder_tasks(case_path, engines, seeds, runs_root, rungs):
+        rd = run_dir_for(load_case(case_path, overrides=t["overrides"]), t["engine"], runs_root)
+        tasks.append({**t, "point": {"rung": t["rung"], "seed": t["seed"]}, "run_dir": str(rd), "run_id": rd.name,
+                      "done": finished(rd)})
+    table = plan_table(tasks)
+    cols = pd.DataFrame([t["point"] for t in tasks])
+    return pd.concat([table[["engine"]], cols, table.drop(columns=["engine"])], axis=1)
+
+
 def run_ladder(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", scheduler=None, workers=None,
                out_dir=None, progress=None, rungs=None) -> LadderResult:
     """Run every rung of ``case_path`` (or only those named in ``rungs``) on every engine for every
     seed (reusing complete runs), then compare (:func:`compare_rungs`) and write ``ladder.csv``,
     ``ladder_runs.csv`` and ``ladder.png`` into ``out_dir`` (default ``runs/<case>/ladder``)."""
     case = load_case(case_path)
-    engines = list(engines or case.engines)
-    todo = [(r, ov) for r, ov in rungs_for(case_path) if rungs is None or r.name in rungs]
-    tasks = []
-    for rung, ov in todo:
-        for seed in seeds:
-            for eng in engines:
-                tasks.append({"case": str(case_path), "overrides": dict(ov, seed=int(seed)), "engine": eng,
-                              "runs_root": str(runs_root), "analyze": False, "rung": rung.name, "seed": int(seed)})
+    tasks = ladder_tasks(case_path, engines, seeds, runs_root, rungs)
     rows = [None] * len(tasks)
     ex = get_executor(scheduler, workers)
     try:
