@@ -1,6 +1,6 @@
 """``crossval(case)``: run one case on two or more engines and compare them.
 
-The runs go side by side (a thread each driving its engine subprocess,
+The runs go side by side (a thread each driving its engine subprocess, as many at once as cores are free,
 :class:`concurrent.futures.ThreadPoolExecutor`) when at least two cores are free, i.e. the number
 of cores minus the 1-minute load average is ≥ 2 (``concurrent="auto"``), otherwise one after the
 other; ``concurrent=True/False`` forces the choice. Each engine's wall time (total and engine loop)
@@ -92,11 +92,11 @@ def crossval(case, runs_root="runs", out_dir=None, concurrent="auto", force: boo
     if not isinstance(case, Case):
         case = load_case(case)
     engines = checked_engines(case, engines)
-    conc, mode = _mode(concurrent)
+    at_once, mode = _mode(concurrent, len(engines))
     t0 = time.perf_counter()
     runs, elapsed = {}, {}
-    if conc:
-        with ThreadPoolExecutor(max_workers=len(engines)) as ex:
+    if at_once > 1:
+        with ThreadPoolExecutor(max_workers=at_once) as ex:
             futs = {e: ex.submit(_run_one, case, e, runs_root, force) for e in engines}
             for e, f in futs.items():
                 runs[e], elapsed[e] = f.result()
@@ -148,15 +148,17 @@ def checked_engines(case: Case, engines=None) -> list:
     return engines
 
 
-def _mode(concurrent) -> tuple[bool, str]:
-    """Whether the engines run side by side, and why: ``"auto"`` when two cores are free."""
+def _mode(concurrent, n_engines: int) -> tuple[int, str]:
+    """How many of ``n_engines`` runs go at once, and why: ``"auto"`` runs side by side when two
+    cores are free, as many at once as there are free cores (three engines on two free cores: two
+    at once); ``True`` all at once, ``False`` one after the other."""
     if concurrent == "auto":
         fc = free_cores()
-        conc = fc >= 2
-        return conc, (f"concurrent ({fc:.1f} cores free)" if conc else
-                      f"sequential (only {fc:.1f} of {os.cpu_count()} cores free; concurrency needs 2)")
-    conc = bool(concurrent)
-    return conc, "concurrent (forced)" if conc else "sequential (forced)"
+        if fc >= 2:
+            at_once = min(n_engines, int(fc))
+            return at_once, f"concurrent, {at_once} at once ({fc:.1f} cores free)"
+        return 1, f"sequential (only {fc:.1f} of {os.cpu_count()} cores free; concurrency needs 2)"
+    return (n_engines, "concurrent (forced)") if concurrent else (1, "sequential (forced)")
 
 
 def crossval_plan(case_path, engines=None, runs_root="runs", concurrent="auto"):
@@ -167,8 +169,8 @@ def crossval_plan(case_path, engines=None, runs_root="runs", concurrent="auto"):
     side, or one after the other)."""
     from ..stability.sweep import plan_point, plan_table
     engines = checked_engines(load_case(case_path), engines)
-    conc, mode = _mode(concurrent)
-    return plan_table(plan_point(case_path, {}, engines, runs_root)), (len(engines) if conc else 1), mode
+    at_once, mode = _mode(concurrent, len(engines))
+    return plan_table(plan_point(case_path, {}, engines, runs_root)), at_once, mode
 
 
 def _refuse(case: Case, engines: list) -> None:
