@@ -364,11 +364,8 @@ def cmd_status(args) -> int:
                   step, str(r.attempts), secs(r.engine_s, done), "-" if r.pace != r.pace else f"{r.pace:.0f}",
                   secs(r.left_pace_s, done), secs(r.left_clock_s, done))
     con.print(t)
-    from .run_summary import read_summary
-    for d in df.run_dir[df.status == "interrupted"]:       # an unreadable summary.json reads as interrupted
-        damage = (read_summary(d) or {}).get("error")
-        if damage:
-            con.print(f"[red]damaged: {escape(damage)}[/red]")
+    for damage in df.error[(df.status == "interrupted") & df.error.notna()]:    # an unreadable summary.json
+        con.print(f"[red]damaged: {escape(str(damage))}[/red]")
     if (df.status == "interrupted").any():
         con.print("[yellow]an interrupted run resumes from its last restart point when the command that started it "
                   "is run again[/yellow]")

@@ -41,7 +41,7 @@ __all__ = ["run_status", "status_table", "find_runs", "COLUMNS"]
 
 #: the columns of :func:`status_table`, in order (times in seconds of engine time)
 COLUMNS = ["run_dir", "case", "engine", "status", "n_particles", "step", "steps", "steps_expected", "done", "attempts",
-           "engine_s", "pace", "left_pace_s", "left_clock_s", "estimated_s"]
+           "engine_s", "pace", "left_pace_s", "left_clock_s", "estimated_s", "error"]
 
 
 def find_runs(paths) -> list[Path]:
@@ -106,7 +106,9 @@ def run_status(run_dir) -> dict:
     - ``left_pace_s``, ``left_clock_s``: the engine time left [s] at that pace and by the clock's
       estimate before the run (the module docstring); 0 for a complete run;
     - ``estimated_s``: the clock's estimate of the whole run before its first attempt [s] (the
-      latest attempt's, which ``left_clock_s`` takes, knows more of the machine).
+      latest attempt's, which ``left_clock_s`` takes, knows more of the machine);
+    - ``error``: what the summary says went wrong (a run that failed, or a summary.json that cannot
+      be read: :func:`orchestrator.run_summary.read_summary`), else None.
     """
     run_dir = Path(run_dir)
     s = read_summary(run_dir) or {}
@@ -136,7 +138,7 @@ def run_status(run_dir) -> dict:
         "n_particles": s.get("n_particles"), "step": reached, "steps": steps, "steps_expected": expected,
         "done": reached / expected if expected and reached is not None else nan,
         "attempts": len(attempts), "engine_s": nan if spent is None else float(spent), "pace": pace,
-        "left_pace_s": left_pace, "left_clock_s": left_clock, "estimated_s": first,
+        "left_pace_s": left_pace, "left_clock_s": left_clock, "estimated_s": first, "error": s.get("error"),
     }
 
 
