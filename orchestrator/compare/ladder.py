@@ -141,13 +141,10 @@ def ladder_plan(case_path, engines=None, seeds=(1, 2, 3), runs_root="runs", rung
     """What the ladder would run, before any run (``orchestrator crossval CASE --ladder --dry-run``):
     the table of :func:`orchestrator.stability.sweep.plan_table` with the columns ``rung`` and
     ``seed``: each run reused or to run, its size and estimate (no packing, mesh or run directory)."""
-    from ..runner import run_dir_for
-    from ..stability.sweep import finished, plan_table
-    tasks = []
-    for t in ladder_tasks(case_path, engines, seeds, runs_root, rungs):
-        rd = run_dir_for(load_case(case_path, overrides=t["overrides"]), t["engine"], runs_root)
-        tasks.append({**t, "point": {"rung": t["rung"], "seed": t["seed"]}, "run_dir": str(rd), "run_id": rd.name,
-                      "done": finished(rd)})
+    from ..stability.sweep import plan_point, plan_table
+    tasks = [task for t in ladder_tasks(case_path, engines, seeds, runs_root, rungs)
+             for task in plan_point(case_path, {"rung": t["rung"], "seed": t["seed"]}, [t["engine"]], runs_root,
+                                    overrides=t["overrides"])]
     table = plan_table(tasks)
     cols = pd.DataFrame([t["point"] for t in tasks])
     return pd.concat([table[["engine"]], cols, table.drop(columns=["engine"])], axis=1)

@@ -104,9 +104,11 @@ def finished(run_dir) -> bool:
     return (s.get("status") == "complete" and (Path(run_dir) / "frames.h5").exists()) or s.get("status") == "unstable"
 
 
-def plan_point(case_path, pt: dict, engines: list[str], runs_root) -> list[dict]:
-    """The tasks of one point (one per engine); an invalid point gives tasks marked ``invalid``."""
-    ov = nested(pt)
+def plan_point(case_path, pt: dict, engines: list[str], runs_root, overrides: dict | None = None) -> list[dict]:
+    """The tasks of one point (one per engine); an invalid point gives tasks marked ``invalid``.
+    ``pt`` holds the point's dotted fields, made the case's overrides, unless ``overrides`` are
+    given (a ladder's rung and seed: ``pt`` then only labels the point)."""
+    ov = nested(pt) if overrides is None else overrides
     try:
         case = load_case(case_path, overrides=ov)
     except CaseError as exc:                 # an invalid point fails alone, the others still run
