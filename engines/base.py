@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import re
 import selectors
 import shutil
 import signal
@@ -67,6 +68,10 @@ CASE_FIELDS = {"tangential_history_displacement": "contact.tangential_history: d
 _VERSIONS: dict = {}
 #: ``<engine>/<scene>.<ext>.j2``: the top-level templates/ folder, shipped as package data
 TEMPLATES = templates_dir()
+#: the line a deck prints once it knows the step its run ends at, on every engine (a triaxial's
+#: stage 1 goes on until it converges, so its length is known only when the loading starts, and
+#: again on each resume in the loading): the progress lines then count toward that step
+RUN_ENDS = re.compile(r"^RUN ENDS at step (\d+)")
 
 
 class EngineError(RuntimeError):
@@ -231,6 +236,13 @@ class Engine(ABC):
         """Parse the current step from one line of engine output, or None."""
         return None
 
+    @staticmethod
+    def progress_end(line: str) -> int | None:
+        """The step the run ends at, from a deck's ``RUN ENDS at step N`` line (:data:`RUN_ENDS`), or
+        None: the same contract line on every engine."""
+        m = RUN_ENDS.match(line)
+        return int(m.group(1)) if m else None
+
     @abstractmethod
     def parse(self, case, params: dict, run_dir: Path, meta: dict) -> Path:
         """Read the engine's dumps in ``run_dir`` and write ``run_dir/frames.h5``."""
@@ -290,10 +302,15 @@ class Engine(ABC):
                     buf += chunk
                     *lines, buf = buf.split(b"\n")
                     for raw in lines:
-                        s = self.progress_step(raw.decode(errors="replace"))
+                        text = raw.decode(errors="replace")
+                        s = self.progress_step(text)
                         if s is not None:
                             step = s
                             bar.update(step)
+                        end = self.progress_end(text)
+                        if end is not None:
+                            bar.end_at(end)
+                            attempt.end_at(end)
                     attempt.update(step, proc.pid)
                 if not _reap(proc, 30.0, usage):
                     raise subprocess.TimeoutExpired(cmd, 30.0)
@@ -441,6 +458,17 @@ class _Progress:
             self.task = self.p.add_task(label, total=self.expected or total, clock="")
         except Exception:
             self.p = None
+
+    def end_at(self, step: int):
+        """The run ends at ``step`` (the deck has said so, :data:`RUN_ENDS`): the lines count toward it,
+        no longer toward the expected steps (the clock's guess at a triaxial's stage 1: YADE's medium
+        clump run read "step 496,000/~528,000 expected (94 %), ETA 14.5 min" with 208 000 steps of
+        loading, 1.7 h, still to run)."""
+        if step <= 0 or (self.p is None and not self.lines):
+            return
+        self.expected, self.total = None, int(step)
+        if self.p is not None:
+            self.p.update(self.task, total=self.total)
 
     def goal(self, step: int) -> int:
         """The step count the progress is measured against [-]: the expected steps until the run

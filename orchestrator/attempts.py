@@ -141,6 +141,12 @@ class AttemptRecord:
             self.entry["first_step"] = int(step)
         self.entry["last_step"] = max(self.entry["last_step"] or 0, int(step))
 
+    def end_at(self, step: int) -> None:
+        """Note the step the run ends at, once the deck has said it (``end_step``; a triaxial's
+        loading end, engines.base.RUN_ENDS): ``orchestrator status`` counts toward it (written with
+        the next update)."""
+        self.entry["end_step"] = int(step)
+
     def update(self, step: int, pid: int | None = None, force: bool = False) -> None:
         """Note the engine's current ``step`` and, every EVERY seconds, write the record with the
         wall time and the CPU time of process ``pid`` and its descendants so far."""

@@ -25,7 +25,8 @@ A scene that decides its step count while it runs (a triaxial's stage 1 ends whe
 converged) has a budget of steps it may take and fewer it is expected to take (what the engine's
 measured runs took, the steps the clock's estimate is for): the share done and the time left count
 the expected steps (``steps_expected``; the budget for a run recorded before session 30, whose
-summary does not say).
+summary does not say), until the deck has said the step the run ends at (a triaxial's, once its
+loading starts: the attempt record's ``end_step``, engines.base.RUN_ENDS), then that step.
 """
 from __future__ import annotations
 
@@ -95,7 +96,8 @@ def run_status(run_dir) -> dict:
 
     - ``status``: ``complete``, ``running`` (a live process holds the run), ``interrupted`` (resume
       it by running the same command again), ``failed``, ``unstable``, ...;
-    - ``step``: the furthest step reached [-]; ``steps``: the run's step budget [-];
+    - ``step``: the furthest step reached [-]; ``steps``: the run's step budget, or the step it ends
+      at once the deck has said it (``end_step``, the module docstring) [-];
       ``steps_expected``: the steps it is expected to take (the module docstring); ``done``: step
       over steps_expected;
     - ``attempts``: how many times the engine was started on it;
@@ -112,10 +114,11 @@ def run_status(run_dir) -> dict:
     """
     run_dir = Path(run_dir)
     s = read_summary(run_dir) or {}
-    attempts = read_attempts(run_dir)
     nan = float("nan")
-    steps = int(s.get("steps_run") or s.get("steps") or 0) or None
-    expected = int(s.get("steps_run") or s.get("estimated_steps") or steps or 0) or None
+    attempts = read_attempts(run_dir)
+    end = next((a["end_step"] for a in reversed(attempts) if isinstance(a.get("end_step"), int)), None)
+    steps = int(s.get("steps_run") or end or s.get("steps") or 0) or None
+    expected = int(s.get("steps_run") or end or s.get("estimated_steps") or steps or 0) or None
     status = s.get("status", "unknown")
     reached = max((a["last_step"] for a in attempts if isinstance(a.get("last_step"), int)), default=None)
     est = s.get("estimated_engine_time_s")
@@ -132,7 +135,8 @@ def run_status(run_dir) -> dict:
         spent = sum(times) if times and None not in times else None
         left = max(expected - reached, 0) if expected and reached is not None else None
         left_pace = left / pace if left is not None and pace == pace else nan
-        left_clock = est * left / expected if left is not None else nan
+        per = s.get("estimated_steps") or expected              # the steps the clock's estimate is for
+        left_clock = est * left / int(per) if left is not None and per else nan
     return {
         "run_dir": str(run_dir), "case": s.get("case", ""), "engine": s.get("engine", ""), "status": status,
         "n_particles": s.get("n_particles"), "step": reached, "steps": steps, "steps_expected": expected,

@@ -59,6 +59,30 @@ def test_a_run_counts_toward_the_steps_expected_then_the_budget(monkeypatch, cap
     assert abs(eta - (200_000 - step) / 500) / ((200_000 - step) / 500) < 0.05
 
 
+def test_a_run_whose_deck_says_its_end_counts_toward_it(monkeypatch, capsys):
+    """A triaxial's deck prints the step its run ends at once the loading starts (engines.base.RUN_ENDS):
+    from then on the lines count toward that step, exactly (no "expected", no budget), and the ETA with
+    them, though the clock's guess at stage 1 was shorter."""
+    clock = [0.0]
+    monkeypatch.setattr(base.time, "perf_counter", lambda: clock[0])
+    p = base._Progress("run", total=1_008_000, expected=528_000)
+    assert base.Engine.progress_end("RUN ENDS at step 704201") == 704_201
+    assert base.Engine.progress_end("SHEAR start at iter 384201, H0 = 0.02 m") is None
+    step = 496_000
+    for t in range(200):
+        clock[0] = float(t)
+        step += 30
+        p.update(step)
+        if t == 100:
+            p.end_at(base.Engine.progress_end("RUN ENDS at step 704201"))
+    err = capsys.readouterr().err.strip().splitlines()
+    last = LINE.search(err[-1])
+    assert last.group(2) == "704,201" and last.group(3) is None and "expected" not in err[-1], err[-1]
+    assert int(last.group(4)) == round(100 * step / 704_201)
+    eta = float(last.group(5)) * SECONDS[last.group(6)]
+    assert abs(eta - (704_201 - step) / 30) / ((704_201 - step) / 30) < 0.05, err[-1]
+
+
 def test_an_expected_count_at_the_budget_is_the_budget(capsys):
     """A scene of fixed length: the expected steps are the budget, and the line says the budget only."""
     base._Progress("run", total=200_000, expected=200_000)

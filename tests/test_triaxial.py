@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from scipy.stats import poisson
 
+from engines import get_engine
 from notebook_util import execute_notebook, notebook_images, notebook_text
 from orchestrator.case import load_case
 
@@ -93,6 +94,22 @@ def test_axial_loading(runs, eng):
     if eng == "liggghts":
         subs = {s["feature"]: s["mechanism"] for s in out.summary["substitutions"]}
         assert subs.get("membrane") == "shell_pressure"
+
+
+@pytest.mark.engine
+@pytest.mark.parametrize("eng", ENGINES)
+def test_the_deck_says_where_the_run_ends(runs, eng):
+    """Stage 1 goes on until it converges, so the run's length is known once the loading starts: the
+    deck then prints the step it ends at (``RUN ENDS at step N``, engines.base.RUN_ENDS, the progress
+    lines' goal from there on), which is the loading's first step plus ``shear_steps`` and the step
+    the run ended at."""
+    out = outcome(runs, eng)
+    log = (out.run_dir / "engine.log").read_text(errors="replace")
+    ends = {get_engine(eng).progress_end(line) for line in log.splitlines()} - {None}
+    start = int(re.search(r"^SHEAR (?:start at iter|from step) (\d+)", log, flags=re.M).group(1))
+    shear_steps = json.loads((out.run_dir / "params.json").read_text())["scene"]["shear_steps"]
+    assert ends == {start + shear_steps}, (ends, start, shear_steps)
+    assert out.summary["steps_run"] == start + shear_steps
 
 
 @pytest.mark.engine

@@ -233,6 +233,14 @@ class Controller:
             self.shear_end = O.iter + 1 + c["shear_steps"]
             O.stopAtIter = min(O.stopAtIter, self.shear_end)   # a checkpoint's stop may come first
             print("SHEAR start at iter %d, H0 = %.9g m, v = %.6g m/s" % (O.iter + 1, H, self.v), flush=True)
+            self.announce_end()
+
+    def announce_end(self):
+        """Print the step the run ends at once it is known (in stage 2: the loading's last step), the
+        deck line the progress lines count toward (engines.base.RUN_ENDS); at the stage switch and
+        on each resume in stage 2."""
+        if self.stage == 2:
+            print("RUN ENDS at step %d" % self.shear_end, flush=True)
 
     def stop_iter(self):
         """The run ends after the loading steps (set at the stage switch), or after the longest stage 1."""
