@@ -40,8 +40,8 @@ from pathlib import Path
 
 from orchestrator.case import load_case
 
-from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, samples_from_runs, speed_factor,
-                                speed_ratio, table_entry)
+from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
+                                samples_from_runs, speed_factor, speed_ratio)
 from orchestrator.runner import run_case
 from orchestrator.scenes.triaxial import stage1_problems
 from engines.base import UnsupportedFeature
@@ -105,8 +105,9 @@ def main(argv=None) -> int:
             if not (s.shared or off_plan):
                 machine_err["kept"] = max(machine_err["kept"] or 0.0, abs(r3 - 1))
         load = "-" if s.load is None else f"{s.load:.1f}/{s.cores}"
-        # the steps the table expects this run to take (the plan's units: clock refresh --steps-only)
-        expected = expected_steps(budget, s.plan, table_entry(table.get(s.engine, {}), s.scene))
+        # the steps the table expects this run to take (the plan's units: clock refresh --steps-only),
+        # as the dry run counts them (a variant without its own entry: the engine that ran it)
+        expected, _ = planned_steps(table, s.engine, s.scene, budget, s.plan)
         print(f"{s.engine:9s} {s.scene:12s} {s.n_particles:6d} {s.steps:9d} {expected:9d} {s.ranks:2d} {s.engine_s:9.1f} "
               f"{1e3 * s.loop_s / s.steps:8.3f} {s.engine_s - s.loop_s:7.1f} {est:9.1f} {r1:6.2f} {loo:9.1f} {r2:6.2f} {r3:7.2f} {load:>9s}  {Path(s.source).name}"
               + ("  shared" if s.shared else "") + ("  off-plan" if off_plan else ""))
