@@ -10,7 +10,7 @@ matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
-from ._fits import erf_profile, fractal_dimension
+from ._fits import erf_profile, fractal_dimension, log_binned
 from ..numerics import BLOCKS
 
 __all__ = ["plot_d2min", "plot_rdf", "plot_coordination", "plot_clusters", "plot_profiles", "plot_shearband",
@@ -133,14 +133,17 @@ def plot_clusters(res, **kw):
     ct = res.tables["clusters"]
     fig, (a1, a2) = _fig(2)
     if len(sd):
-        a1.loglog(sd["s"], sd["p"], "o", ms=4)
+        # every size as counted (its tail a floor of sizes seen once), and averaged over log bins
+        a1.loglog(sd["s"], sd["p"], ".", ms=3, color="0.6", label="per size")
+        a1.loglog(*log_binned(sd["s"], sd["p"]), "o", ms=5, color="C0", label="log-binned")
+        a1.legend(fontsize=8)
         tau = res.scalars.get("tau")
         if tau is not None and np.isfinite(tau):
             s = np.geomspace(max(sd["s"].min(), 1), sd["s"].max(), 50)
             from scipy.special import zeta
             smin = res.options.get("s_min", 1)
             frac = sd.loc[sd["s"] >= smin, "p"].sum()
-            a1.loglog(s, frac * s ** (-tau) / zeta(tau, smin), "-",
+            a1.loglog(s, frac * s ** (-tau) / zeta(tau, smin), "-", color="C1",
                       label=rf"$\tau$ = {tau:.2f} ± {res.scalars['tau_err']:.2f}")
             a1.legend(fontsize=8)
     a1.set_xlabel("cluster size s"); a1.set_ylabel("P(s)")

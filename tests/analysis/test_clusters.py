@@ -4,6 +4,7 @@ import pytest
 from orchestrator.analysis.clusters import (cluster_properties, find_clusters, fractal_dimension, powerlaw_fit,
                                             analyze_clusters)
 from orchestrator.analysis.d2min import analyze_d2min
+from orchestrator.analysis._fits import log_binned
 
 D = 1e-4
 
@@ -77,3 +78,22 @@ def test_analyze_clusters_end_to_end(shear_cell):
     assert abs(len(t) - 0.1 * n_valid) <= 2
     assert res.tables["clusters"]["size"].sum() == len(t)
     assert res.tables["size_distribution"]["p"].sum() == pytest.approx(1)
+
+
+def test_log_binned_points_follow_the_power_law_where_the_per_size_tail_is_flat():
+    """P(s) ∝ s^-2 sampled as counts: beyond a few hundred clusters every large size is seen once or
+    not at all, so the per-size histogram's tail is flat at 1/N; averaged over logarithmic bins the
+    points follow s^-2 (Clauset, Shalizi & Newman 2009, fig. 1), as the plot shows them."""
+    s = np.arange(1, 2001, dtype=float)
+    exact = s ** -2.0 / np.sum(s ** -2.0)
+    c, d = log_binned(s, exact)
+    assert np.all(np.abs(d / (c ** -2.0 / np.sum(s ** -2.0)) - 1) < 0.2), d
+    rng = np.random.default_rng(1)
+    sizes = rng.choice(s, size=600, p=exact)
+    seen, counts = np.unique(sizes, return_counts=True)
+    p = counts / counts.sum()
+    tail = seen >= 20
+    assert np.all(p[tail] <= 2 / counts.sum())                       # the floor: seen once or twice
+    c, d = log_binned(seen, p)
+    slope = np.polyfit(np.log(c[c >= 2]), np.log(d[c >= 2]), 1)[0]
+    assert -2.5 < slope < -1.5, slope
