@@ -462,8 +462,8 @@ class _Progress:
     def end_at(self, step: int):
         """The run ends at ``step`` (the deck has said so, :data:`RUN_ENDS`): the lines count toward it,
         no longer toward the expected steps (the clock's guess at a triaxial's stage 1: YADE's medium
-        clump run read "step 496,000/~528,000 expected (94 %), ETA 14.5 min" with 208 000 steps of
-        loading, 1.7 h, still to run)."""
+        clump run read "step 496,000/~528,000 expected (94 %), ETA 14.5 min" with its loading running
+        to step 704 001)."""
         if step <= 0 or (self.p is None and not self.lines):
             return
         self.expected, self.total = None, int(step)

@@ -66,7 +66,7 @@ def test_a_run_whose_deck_says_its_end_counts_toward_it(monkeypatch, capsys):
     clock = [0.0]
     monkeypatch.setattr(base.time, "perf_counter", lambda: clock[0])
     p = base._Progress("run", total=1_008_000, expected=528_000)
-    assert base.Engine.progress_end("RUN ENDS at step 704201") == 704_201
+    assert base.Engine.progress_end("RUN ENDS at step 704001") == 704_001
     assert base.Engine.progress_end("SHEAR start at iter 384201, H0 = 0.02 m") is None
     step = 496_000
     for t in range(200):
@@ -74,13 +74,13 @@ def test_a_run_whose_deck_says_its_end_counts_toward_it(monkeypatch, capsys):
         step += 30
         p.update(step)
         if t == 100:
-            p.end_at(base.Engine.progress_end("RUN ENDS at step 704201"))
+            p.end_at(base.Engine.progress_end("RUN ENDS at step 704001"))
     err = capsys.readouterr().err.strip().splitlines()
     last = LINE.search(err[-1])
-    assert last.group(2) == "704,201" and last.group(3) is None and "expected" not in err[-1], err[-1]
-    assert int(last.group(4)) == round(100 * step / 704_201)
+    assert last.group(2) == "704,001" and last.group(3) is None and "expected" not in err[-1], err[-1]
+    assert int(last.group(4)) == round(100 * step / 704_001)
     eta = float(last.group(5)) * SECONDS[last.group(6)]
-    assert abs(eta - (704_201 - step) / 30) / ((704_201 - step) / 30) < 0.05, err[-1]
+    assert abs(eta - (704_001 - step) / 30) / ((704_001 - step) / 30) < 0.05, err[-1]
 
 
 def test_an_expected_count_at_the_budget_is_the_budget(capsys):

@@ -72,16 +72,16 @@ def test_the_steps_the_deck_says_the_run_ends_at_replace_the_expected_ones(tmp_p
     """Once a triaxial's loading starts its deck prints the step the run ends at (engines.base.RUN_ENDS,
     kept as the attempt's ``end_step``): the share done and the time left count toward it, exactly
     (YADE's medium clump run: its stage 1 took longer than LIGGGHTS' clumps, whose steps the clock
-    counts, so the clock's ~528 000 steps were 704 201), and the clock's time left keeps its cost per step."""
+    counts, so the clock's ~528 000 steps were 704 001), and the clock's time left keeps its cost per step."""
     d = write_run(tmp_path / "r", {"status": "running", "steps": 1008000, "estimated_steps": 528000,
                                     "estimated_engine_time_s": 5280.0},
-                  [attempt(0, 496000, 4960.0, 5000.0), {**attempt(496000, 504000, 80.0, 81.0), "end_step": 704201}])
+                  [attempt(0, 496000, 4960.0, 5000.0), {**attempt(496000, 504000, 80.0, 81.0), "end_step": 704001}])
     st = run_status(d)
-    assert st["steps"] == st["steps_expected"] == 704201 and st["done"] == pytest.approx(504000 / 704201)
+    assert st["steps"] == st["steps_expected"] == 704001 and st["done"] == pytest.approx(504000 / 704001)
     assert st["left_pace_s"] == pytest.approx(200201 / 100.0)
     assert st["left_clock_s"] == pytest.approx(5280.0 * 200201 / 528000)
     out = orc("status", d)
-    assert "504,000/704,201 (72 %)" in out.stdout, out.stdout
+    assert "504,000/704,001 (72 %)" in out.stdout, out.stdout
 
 
 def test_running_run_is_reported_running(tmp_path):

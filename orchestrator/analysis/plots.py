@@ -10,6 +10,7 @@ matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
+from scipy.special import zeta
 from ._fits import erf_profile, fractal_dimension, log_binned
 from ..numerics import BLOCKS
 
@@ -140,7 +141,6 @@ def plot_clusters(res, **kw):
         tau = res.scalars.get("tau")
         if tau is not None and np.isfinite(tau):
             s = np.geomspace(max(sd["s"].min(), 1), sd["s"].max(), 50)
-            from scipy.special import zeta
             smin = res.options.get("s_min", 1)
             frac = sd.loc[sd["s"] >= smin, "p"].sum()
             a1.loglog(s, frac * s ** (-tau) / zeta(tau, smin), "-", color="C1",
