@@ -16,7 +16,9 @@ stage-1 chunks the engine's other runs took, not from the chunks this run took) 
   engine given here measure it (their :func:`orchestrator.clock.speed_ratio`, those of the same
   scene where there are any, at this run's size, and of as many ranks or threads where there are
   any: :func:`orchestrator.clock.speed_factor`, what ``run --dry-run`` prints once the machine has
-  recorded them; "n/a" without such a run).
+  recorded them; "n/a" without such a run, and for a run whose package entry was fitted on this
+  machine, which the dry run takes unscaled: YADE's medium clump triaxial since session 41, whose
+  machine column read 1.15 before its own run was fitted into the table).
 
 ``ms/step`` is the run's own loop time per step (one rank's, as the fit takes it) and ``start s``
 its start-up and set-up (engine time minus loop time): what the table's per-step and start-up
@@ -40,8 +42,8 @@ from pathlib import Path
 
 from orchestrator.case import load_case
 
-from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, planned_steps,
-                                samples_from_runs, speed_factor, speed_ratio)
+from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, machine_id,
+                                planned_steps, samples_from_runs, speed_factor, speed_ratio, table_entry_key)
 from orchestrator.runner import run_case
 from orchestrator.scenes.triaxial import stage1_problems
 from engines.base import UnsupportedFeature
@@ -92,7 +94,12 @@ def main(argv=None) -> int:
         mf = speed_factor([(o.scene, o.n_particles, ratio_of[o.source], o.quiet, o.ranks) for o in samples
                            if o.engine == s.engine and o.source != s.source], s.scene, s.n_particles, s.ranks)
         pk, _ = estimate_engine_time(s.engine, s.scene, s.n_particles, budget, s.ranks, table=package, plan=s.plan)
-        r3 = mf[0] * pk / s.engine_s if mf and pk == pk else math.nan
+        # a package entry fitted on this machine is this machine's speed already (the dry run does not
+        # scale it, clock.estimate_engine_time): scaled again it would say nothing, and unscaled it
+        # is the run predicting itself where the entry was fitted on it ("n/a")
+        used = table_entry_key(package.get(s.engine, {}), s.scene)
+        fitted_here = used is not None and package[s.engine][used].machine == machine_id()
+        r3 = mf[0] * pk / s.engine_s if mf and pk == pk and not fitted_here else math.nan
         if r2 == r2:
             worst = max(worst or 0.0, abs(r2 - 1))
             if not s.shared:
