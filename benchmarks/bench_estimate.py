@@ -42,8 +42,8 @@ from pathlib import Path
 
 from orchestrator.case import load_case
 
-from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, load_table, machine_id,
-                                planned_steps, samples_from_runs, speed_factor, speed_ratio, table_entry_key)
+from orchestrator.clock import (base_kind, estimate_engine_time, expected_steps, fit, fitted_here, load_table,
+                                planned_steps, samples_from_runs, speed_factor, speed_ratio)
 from orchestrator.runner import run_case
 from orchestrator.scenes.triaxial import stage1_problems
 from engines.base import UnsupportedFeature
@@ -97,9 +97,8 @@ def main(argv=None) -> int:
         # a package entry fitted on this machine is this machine's speed already (the dry run does not
         # scale it, clock.estimate_engine_time): scaled again it would say nothing, and unscaled it
         # is the run predicting itself where the entry was fitted on it ("n/a")
-        used = table_entry_key(package.get(s.engine, {}), s.scene)
-        fitted_here = used is not None and package[s.engine][used].machine == machine_id()
-        r3 = mf[0] * pk / s.engine_s if mf and pk == pk and not fitted_here else math.nan
+        r3 = (mf[0] * pk / s.engine_s if mf and pk == pk and not fitted_here(package.get(s.engine, {}), s.scene)
+              else math.nan)
         if r2 == r2:
             worst = max(worst or 0.0, abs(r2 - 1))
             if not s.shared:

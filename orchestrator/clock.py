@@ -668,8 +668,7 @@ def estimate_engine_time(engine: str, scene: str, n_particles: int, steps: int, 
     table = load_table(user) if table is None else table
     scenes = table.get(engine, {})
     used = table_entry_key(scenes, scene)
-    fitted_here = used is not None and scenes[used].machine == machine_id()
-    if machine_speed and (used or scene) not in user.get(engine, {}) and not fitted_here:   # a user entry is this machine's
+    if machine_speed and (used or scene) not in user.get(engine, {}) and not fitted_here(scenes, scene):   # a user entry is this machine's
         mf = _machine_factor(engine, scene, n_particles, ranks)
         if mf is not None:
             scale, note = mf[0], f", × {mf[0]:.2f} for this machine's speed ({mf[1]} run(s))"
@@ -891,6 +890,14 @@ def table_entry_key(entries: dict, key: str) -> str | None:
     """The key of the entry among one engine's table ``entries`` that serves ``key``: its own, or
     the nearest of :func:`key_fallbacks` for a variant not measured yet; None without one."""
     return next((k for k in key_fallbacks(key) if entries.get(k)), None)
+
+
+def fitted_here(entries: dict, key: str) -> bool:
+    """Whether the entry serving ``key`` among one engine's table ``entries`` (:func:`table_entry_key`)
+    was fitted on this machine (:func:`machine_id`): its figures are this machine's speed already,
+    so :func:`estimate_engine_time` does not scale them by :func:`machine_factor`."""
+    k = table_entry_key(entries, key)
+    return k is not None and entries[k].machine == machine_id()
 
 
 def table_entry(entries: dict, key: str):

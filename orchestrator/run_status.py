@@ -117,8 +117,9 @@ def run_status(run_dir) -> dict:
     nan = float("nan")
     attempts = read_attempts(run_dir)
     end = next((a["end_step"] for a in reversed(attempts) if isinstance(a.get("end_step"), int)), None)
-    steps = int(s.get("steps_run") or end or s.get("steps") or 0) or None
-    expected = int(s.get("steps_run") or end or s.get("estimated_steps") or steps or 0) or None
+    known = s.get("steps_run") or end                      # the step the run ended, or ends, at
+    steps = int(known or s.get("steps") or 0) or None
+    expected = int(known or s.get("estimated_steps") or steps or 0) or None
     status = s.get("status", "unknown")
     reached = max((a["last_step"] for a in attempts if isinstance(a.get("last_step"), int)), default=None)
     est = s.get("estimated_engine_time_s")

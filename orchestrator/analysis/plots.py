@@ -137,7 +137,6 @@ def plot_clusters(res, **kw):
         # every size as counted (its tail a floor of sizes seen once), and averaged over log bins
         a1.loglog(sd["s"], sd["p"], ".", ms=3, color="0.6", label="per size")
         a1.loglog(*log_binned(sd["s"], sd["p"]), "o", ms=5, color="C0", label="log-binned")
-        a1.legend(fontsize=8)
         tau = res.scalars.get("tau")
         if tau is not None and np.isfinite(tau):
             s = np.geomspace(max(sd["s"].min(), 1), sd["s"].max(), 50)
@@ -145,7 +144,7 @@ def plot_clusters(res, **kw):
             frac = sd.loc[sd["s"] >= smin, "p"].sum()
             a1.loglog(s, frac * s ** (-tau) / zeta(tau, smin), "-", color="C1",
                       label=rf"$\tau$ = {tau:.2f} ± {res.scalars['tau_err']:.2f}")
-            a1.legend(fontsize=8)
+        a1.legend(fontsize=8)
     a1.set_xlabel("cluster size s"); a1.set_ylabel("P(s)")
     if len(ct):
         # a one-grain cluster has R_g = 0 (its round-off, ~1e-15 mm, would stretch the axis): s >= 2
